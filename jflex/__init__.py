@@ -1,0 +1,28 @@
+"""jflex: differentiable dynamics and identification of flexible manipulators, in JAX.
+
+A model is a rigid core (:class:`Robot`) plus effects; every analysis consumes that model.
+Everything runs in float64 unless ``JFLEX_X64=0`` is set before import.
+"""
+
+import importlib.metadata as _md
+import os as _os
+
+import jax as _jax
+
+if _os.environ.get("JFLEX_X64", "1") != "0":
+    _jax.config.update("jax_enable_x64", True)
+
+try:
+    __version__ = _md.version("jflex")
+except _md.PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0.0.0"
+
+from ._errors import (
+    ConfigError as ConfigError,
+    DataError as DataError,
+    JFlexError as JFlexError,
+    ParameterError as ParameterError,
+    ShapeError as ShapeError,
+    SolverError as SolverError,
+    URDFError as URDFError,
+)
