@@ -26,3 +26,9 @@ from ._errors import (
     SolverError as SolverError,
     URDFError as URDFError,
 )
+from ._runs import (
+    experiment_cli as experiment_cli,
+    load_yaml as load_yaml,
+    make_run_dir as make_run_dir,
+    write_results as write_results,
+)

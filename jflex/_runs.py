@@ -1,0 +1,109 @@
+"""One convention for every subcommand and experiment: a YAML config in, one run folder out.
+
+Every run takes a config (a YAML file, with a sensible default), accepts ``--out DIR`` and
+writes ``DIR/results.json`` (the figures it computed, each with its unit) plus its plots. Without
+``--out`` it makes a fresh folder ``runs/<name>-<timestamp>``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+import os
+import pathlib
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ._errors import ConfigError
+
+
+def make_run_dir(name: str, out: str | os.PathLike | None = None) -> pathlib.Path:
+    """Return the run folder: ``out`` if given (created), else a fresh ``runs/<name>-<stamp>``."""
+    if out is not None:
+        path = pathlib.Path(out)
+    else:
+        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        path = pathlib.Path("runs") / f"{name}-{stamp}"
+        k = 1
+        while path.exists():
+            path = pathlib.Path("runs") / f"{name}-{stamp}-{k}"
+            k += 1
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, Mapping):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if hasattr(x, "__array__") and not isinstance(x, (str, bytes)):
+        arr = np.asarray(x)
+        if np.iscomplexobj(arr):
+            return {"real": _jsonable(arr.real), "imag": _jsonable(arr.imag)}
+        return _jsonable(arr.tolist()) if arr.ndim else _jsonable(arr.item())
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)  # JSON has no NaN/inf; keep them visible rather than dropping them
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.floating,)):
+        return _jsonable(float(x))
+    return x
+
+
+def write_results(run_dir: str | os.PathLike, results: Mapping[str, Any], name: str = "results.json") -> pathlib.Path:
+    """Write ``results`` (nested dicts of numbers/arrays, units in the keys or a ``unit`` field) as JSON.
+
+    Written to a temporary file first and renamed, so an interrupted run never leaves a torn file.
+    """
+    path = pathlib.Path(run_dir) / name
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(_jsonable(results), indent=2))
+    os.replace(tmp, path)
+    return path
+
+
+def load_yaml(path: str | os.PathLike) -> dict:
+    """Read a YAML mapping; a missing file or a non-mapping top level is a :class:`ConfigError`."""
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML ({exc})") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
+    return data
+
+
+def experiment_cli(
+    name: str,
+    default_config: str | os.PathLike,
+    run: Callable[[dict, pathlib.Path], Mapping[str, Any]],
+    argv: Sequence[str] | None = None,
+    description: str | None = None,
+) -> pathlib.Path:
+    """Parse ``[CONFIG] [--out DIR]``, call ``run(config_dict, run_dir)`` and write its results.
+
+    ``run`` returns the results mapping; it may also write plots into ``run_dir``.
+    Returns the run folder.
+    """
+    parser = argparse.ArgumentParser(prog=name, description=description)
+    parser.add_argument("config", nargs="?", default=str(default_config), help="YAML config (default: %(default)s)")
+    parser.add_argument("--out", default=None, help="run folder (default: a fresh runs/<name>-<time>)")
+    args = parser.parse_args(argv)
+    cfg = load_yaml(args.config)
+    run_dir = make_run_dir(name, args.out)
+    results = dict(run(cfg, run_dir))
+    results.setdefault("config", str(args.config))
+    write_results(run_dir, results)
+    print(f"{name}: results in {run_dir / 'results.json'}")
+    return run_dir
