@@ -32,3 +32,21 @@ from ._runs import (
     make_run_dir as make_run_dir,
     write_results as write_results,
 )
+from ._robot import Robot as Robot, make_robot as make_robot, check_inertia as check_inertia
+from ._dh import from_dh as from_dh
+from ._urdf import load_urdf as load_urdf, from_urdf_string as from_urdf_string
+from ._dynamics import (
+    aba as aba,
+    crba as crba,
+    forward_dynamics as forward_dynamics,
+    forward_kinematics as forward_kinematics,
+    frame_placement as frame_placement,
+    gravity as gravity,
+    jacobian as jacobian,
+    kinetic_energy as kinetic_energy,
+    nonlinear_effects as nonlinear_effects,
+    potential_energy as potential_energy,
+    regressor as regressor,
+    rnea as rnea,
+)
+from . import effects as effects

@@ -1,0 +1,221 @@
+"""The rigid core of every model: a kinematic tree with inertial parameters.
+
+Topology (names, parents, joint types) is static; every physical number is an array leaf, so
+any of them can be differentiated or fitted and a new value never retraces.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import ParameterError, ShapeError
+
+REVOLUTE = "revolute"
+PRISMATIC = "prismatic"
+JOINT_TYPES = (REVOLUTE, PRISMATIC)
+
+
+class Robot(eqx.Module):
+    """A fixed-base kinematic tree of ``n`` moving joints, each carrying one rigid link.
+
+    Body frame ``i`` is the frame of joint ``i`` (child side): it sits at
+    ``placement_R[i], placement_p[i]`` in the body frame of ``parents[i]`` (``-1``: the base) when
+    ``q[i] = 0``, and moves by a rotation about / translation along ``axis[i]`` (unit, in body
+    axes). Fixed joints are merged at build time; what they carried survives as named frames.
+
+    **Fields** (leaves are arrays; ``n`` joints, ``nf`` extra frames):
+
+    - ``joint_names``, ``link_names``, ``parents``, ``joint_types``: static tuples.
+    - ``placement_R`` (n, 3, 3), ``placement_p`` (n, 3) [m].
+    - ``axis`` (n, 3): joint axes in body axes.
+    - ``inertia`` (n, 10): per link ``[m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz]``
+      [kg, kg m, kg m^2], inertia about the body-frame origin (Pinocchio's order).
+    - ``gravity`` (3,) [m/s^2] in base axes.
+    - ``lower``, ``upper`` (n,) [rad or m]; ``velocity_limit`` (n,); ``effort_limit`` (n,).
+    - ``frame_names``, ``frame_parents`` (static): extra named frames (tool, merged links) on body
+      ``frame_parents[k]`` (``-1``: base) at ``frame_R[k], frame_p[k]``.
+    """
+
+    placement_R: jnp.ndarray
+    placement_p: jnp.ndarray
+    axis: jnp.ndarray
+    inertia: jnp.ndarray
+    gravity: jnp.ndarray
+    lower: jnp.ndarray
+    upper: jnp.ndarray
+    velocity_limit: jnp.ndarray
+    effort_limit: jnp.ndarray
+    frame_R: jnp.ndarray
+    frame_p: jnp.ndarray
+    joint_names: tuple[str, ...] = eqx.field(static=True)
+    link_names: tuple[str, ...] = eqx.field(static=True)
+    parents: tuple[int, ...] = eqx.field(static=True)
+    joint_types: tuple[str, ...] = eqx.field(static=True)
+    frame_names: tuple[str, ...] = eqx.field(static=True, default=())
+    frame_parents: tuple[int, ...] = eqx.field(static=True, default=())
+    base_name: str = eqx.field(static=True, default="base")
+
+    def __check_init__(self):
+        n = len(self.parents)
+        if not (len(self.joint_names) == len(self.link_names) == len(self.joint_types) == n):
+            raise ShapeError("Robot: joint_names, link_names, joint_types and parents must have one entry per joint")
+        for i, p in enumerate(self.parents):
+            if not -1 <= p < i:
+                raise ShapeError(
+                    f"Robot: joint '{self.joint_names[i]}' has parent index {p}; parents must come before "
+                    "their children (topological order) and -1 stands for the base"
+                )
+        for i, t in enumerate(self.joint_types):
+            if t not in JOINT_TYPES:
+                raise ShapeError(f"Robot: joint '{self.joint_names[i]}' has type '{t}', expected one of {JOINT_TYPES}")
+        if len(set(self.joint_names)) != n:
+            raise ShapeError("Robot: joint names must be unique")
+
+    @property
+    def nq(self) -> int:
+        """Number of joint coordinates."""
+        return len(self.parents)
+
+    @property
+    def nv(self) -> int:
+        return len(self.parents)
+
+    def frame_index(self, frame: int | str) -> tuple[int, int]:
+        """Resolve a frame (link index, link name, joint name or extra frame name) statically.
+
+        Returns ``(body, k)``: the body it is attached to and ``k`` the extra-frame index, or -1
+        when the frame is the body frame itself.
+        """
+        if isinstance(frame, (int, np.integer)):
+            if not 0 <= int(frame) < self.nq:
+                raise ShapeError(f"frame index {frame} out of range for a robot with {self.nq} links")
+            return int(frame), -1
+        if frame in self.link_names:
+            return self.link_names.index(frame), -1
+        if frame in self.joint_names:
+            return self.joint_names.index(frame), -1
+        if frame in self.frame_names:
+            k = self.frame_names.index(frame)
+            return self.frame_parents[k], k
+        known = list(self.link_names) + list(self.frame_names)
+        raise ShapeError(f"unknown frame '{frame}'; known frames: {known}")
+
+    def replace(self, **kw) -> "Robot":
+        """A copy with the named leaves replaced (e.g. ``robot.replace(inertia=new)``)."""
+        names = list(kw)
+        return eqx.tree_at(lambda r: [getattr(r, k) for k in names], self, [jnp.asarray(kw[k]) for k in names])
+
+
+def make_robot(
+    *,
+    joint_names: Sequence[str],
+    link_names: Sequence[str],
+    parents: Sequence[int],
+    joint_types: Sequence[str],
+    placement_R,
+    placement_p,
+    axis,
+    inertia=None,
+    gravity=(0.0, 0.0, -9.81),
+    lower=None,
+    upper=None,
+    velocity_limit=None,
+    effort_limit=None,
+    frame_names: Sequence[str] = (),
+    frame_parents: Sequence[int] = (),
+    frame_R=None,
+    frame_p=None,
+    base_name: str = "base",
+) -> Robot:
+    """Build a :class:`Robot`, validating shapes and physical consistency (named errors)."""
+    n = len(parents)
+    def arr(x, shape, field):
+        a = np.asarray(x, dtype=float)
+        if a.shape != shape:
+            raise ShapeError(f"Robot.{field}: expected shape {shape}, got {a.shape}")
+        if not np.all(np.isfinite(a)) and field not in ("lower", "upper", "velocity_limit", "effort_limit"):
+            raise ParameterError(f"Robot.{field}: contains NaN or inf")
+        return a
+
+    ax = arr(axis, (n, 3), "axis")
+    norms = np.linalg.norm(ax, axis=1)
+    for i in range(n):
+        if not norms[i] > 0:
+            raise ParameterError(f"joint '{joint_names[i]}': axis must be non-zero, got {ax[i].tolist()}")
+    ax = ax / norms[:, None]
+    inertia = np.zeros((n, 10)) if inertia is None else arr(inertia, (n, 10), "inertia")
+    for i in range(n):
+        check_inertia(inertia[i], f"link '{link_names[i]}'")
+    nf = len(frame_names)
+    fR = np.tile(np.eye(3), (nf, 1, 1)) if frame_R is None else arr(frame_R, (nf, 3, 3), "frame_R")
+    fp = np.zeros((nf, 3)) if frame_p is None else arr(frame_p, (nf, 3), "frame_p")
+    full = lambda x, v: np.full(n, v) if x is None else arr(x, (n,), "limits")
+    lo, hi = full(lower, -np.inf), full(upper, np.inf)
+    for i in range(n):
+        if lo[i] > hi[i]:
+            raise ParameterError(f"joint '{joint_names[i]}': lower limit {lo[i]} exceeds upper limit {hi[i]}")
+    return Robot(
+        placement_R=jnp.asarray(arr(placement_R, (n, 3, 3), "placement_R")),
+        placement_p=jnp.asarray(arr(placement_p, (n, 3), "placement_p")),
+        axis=jnp.asarray(ax),
+        inertia=jnp.asarray(inertia),
+        gravity=jnp.asarray(arr(gravity, (3,), "gravity")),
+        lower=jnp.asarray(lo),
+        upper=jnp.asarray(hi),
+        velocity_limit=jnp.asarray(full(velocity_limit, np.inf)),
+        effort_limit=jnp.asarray(full(effort_limit, np.inf)),
+        frame_R=jnp.asarray(fR.reshape(nf, 3, 3)),
+        frame_p=jnp.asarray(fp.reshape(nf, 3)),
+        joint_names=tuple(joint_names),
+        link_names=tuple(link_names),
+        parents=tuple(int(p) for p in parents),
+        joint_types=tuple(joint_types),
+        frame_names=tuple(frame_names),
+        frame_parents=tuple(int(p) for p in frame_parents),
+        base_name=base_name,
+    )
+
+
+def check_inertia(pi, where: str, rtol: float = 1e-9) -> None:
+    """Raise :class:`ParameterError` unless ``pi`` is physically consistent: m >= 0 and the
+    inertia about the centre of mass positive semi-definite with the triangle inequalities."""
+    pi = np.asarray(pi, dtype=float)
+    m = pi[0]
+    if not np.isfinite(pi).all():
+        raise ParameterError(f"{where}: inertial parameters contain NaN or inf")
+    if m < 0:
+        raise ParameterError(f"{where}: mass must be >= 0, got {m}")
+    I_o = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
+    if m == 0:
+        if np.abs(pi[1:4]).max() > 0:
+            raise ParameterError(f"{where}: zero mass but non-zero first moment m*c = {pi[1:4].tolist()}")
+        I_c = I_o
+    else:
+        c = pi[1:4] / m
+        I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
+    ev = np.linalg.eigvalsh(I_c)
+    scale = max(1.0, np.abs(ev).max())
+    if ev.min() < -rtol * scale:
+        raise ParameterError(
+            f"{where}: rotational inertia about the centre of mass is not positive semi-definite "
+            f"(principal moments {np.round(ev, 12).tolist()})"
+        )
+    a, b, c3 = np.sort(ev)
+    if a + b < c3 - rtol * scale:
+        raise ParameterError(
+            f"{where}: principal moments {[a, b, c3]} violate the triangle inequality I1 + I2 >= I3"
+        )
+
+
+def check_q(robot: Robot, q, name: str = "q"):
+    """Shape check before tracing: ``q`` must have one entry per joint (batches go through vmap)."""
+    shape = jnp.shape(q)
+    if shape != (robot.nq,):
+        raise ShapeError(
+            f"{name} must have shape ({robot.nq},) for this robot (joints {list(robot.joint_names)}), got {shape}; "
+            "batch with jax.vmap or jflex.sweep"
+        )
