@@ -50,3 +50,18 @@ from ._dynamics import (
     rnea as rnea,
 )
 from . import effects as effects
+from ._model import (
+    Layout as Layout,
+    Linearization as Linearization,
+    Model as Model,
+    bias_forces as bias_forces,
+    dynamic_stiffness as dynamic_stiffness,
+    gravity_stiffness as gravity_stiffness,
+    initial_state as initial_state,
+    input_matrix as input_matrix,
+    linearize as linearize,
+    mass_matrix as mass_matrix,
+    model_forward_dynamics as model_forward_dynamics,
+    model_inverse_dynamics as model_inverse_dynamics,
+    state_rate as state_rate,
+)

@@ -1,0 +1,236 @@
+"""A model is a rigid core plus effects; every analysis consumes this one object.
+
+``x = [q, effect coordinates...]`` are the generalised coordinates, ``z`` the effects' internal
+first-order states. The rigid robot contributes through CRBA and RNEA; each effect through its
+energies (differentiated automatically) and its non-conservative force, see
+:class:`jflex.effects.AbstractEffect`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._dynamics import crba, gravity, rnea
+from ._errors import ShapeError
+from ._robot import Robot
+from .effects._base import AbstractEffect, Slots
+
+
+class Layout(NamedTuple):
+    """Static bookkeeping of a model's vectors."""
+
+    coord_names: tuple[str, ...]
+    state_names: tuple[str, ...]
+    slots: tuple[Slots, ...]
+
+    @property
+    def nx(self) -> int:
+        return len(self.coord_names)
+
+    @property
+    def nz(self) -> int:
+        return len(self.state_names)
+
+
+class Model(eqx.Module):
+    """Rigid robot + effects.
+
+    **Arguments:** ``robot`` (:class:`jflex.Robot`), ``effects`` (sequence of
+    :class:`jflex.effects.AbstractEffect`, applied in order).
+    """
+
+    robot: Robot
+    effects: tuple[AbstractEffect, ...]
+
+    def __init__(self, robot: Robot, effects=()):
+        self.robot = robot
+        self.effects = tuple(effects)
+
+    @property
+    def rigid(self) -> Robot:
+        """The rigid robot after every effect's ``modify_robot`` (e.g. with a payload)."""
+        r = self.robot
+        for e in self.effects:
+            r = e.modify_robot(r)
+        return r
+
+    @property
+    def layout(self) -> Layout:
+        r = self.rigid
+        n = r.nq
+        coords = list(r.joint_names)
+        states: list[str] = []
+        spans = []
+        for e in self.effects:
+            c, s = e.coord_names(r), e.state_names(r)
+            spans.append((len(coords), len(coords) + len(c), len(states), len(states) + len(s)))
+            coords += list(c)
+            states += list(s)
+        nx, nz = len(coords), len(states)
+        slots = tuple(Slots(n, slice(a, b), slice(c, d), nx, nz) for a, b, c, d in spans)
+        return Layout(tuple(coords), tuple(states), slots)
+
+    @property
+    def nx(self) -> int:
+        return self.layout.nx
+
+    @property
+    def nz(self) -> int:
+        return self.layout.nz
+
+    def with_effects(self, *effects) -> "Model":
+        """A new model with ``effects`` appended."""
+        return Model(self.robot, self.effects + tuple(effects))
+
+
+def _check(model: Model, x, name):
+    if jnp.shape(x) != (model.nx,):
+        raise ShapeError(
+            f"{name} must have shape ({model.nx},) for this model (coordinates {list(model.layout.coord_names)}), "
+            f"got {jnp.shape(x)}"
+        )
+
+
+def _effect_energy(model: Model, x, xd):
+    r, lay = model.rigid, model.layout
+    T = jnp.zeros(())
+    V = jnp.zeros(())
+    for e, s in zip(model.effects, lay.slots):
+        T = T + e.kinetic_energy(r, s, x, xd)
+        V = V + e.potential_energy(r, s, x)
+    return T, V
+
+
+def _pad(a, n, nx):
+    return jnp.zeros(nx, a.dtype).at[:n].set(a) if nx > n else a
+
+
+def mass_matrix(model: Model, x):
+    """Generalised mass matrix (nx, nx): rigid CRBA plus the Hessian of the effects' kinetic energy."""
+    _check(model, x, "x")
+    r, lay = model.rigid, model.layout
+    n, nx = r.nq, lay.nx
+    M = jnp.zeros((nx, nx), dtype=x.dtype).at[:n, :n].set(crba(r, x[:n]))
+    T = lambda xd: _effect_energy(model, x, xd)[0]
+    return M + jax.hessian(T)(jnp.zeros_like(x))
+
+
+def bias_forces(model: Model, t, x, xd, z):
+    """``h(x, xd) - sum f_e``: everything but ``M xdd`` and the input, shape (nx,)."""
+    r, lay = model.rigid, model.layout
+    n, nx = r.nq, lay.nx
+    h = _pad(rnea(r, x[:n], xd[:n], jnp.zeros_like(xd[:n])), n, nx)
+
+    # Lagrange's terms of the effects' energies: d/dt(dT/dxd) - dT/dx + dV/dx at xdd = 0.
+    def dT_dxd(x_):
+        return jax.grad(lambda v: _effect_energy(model, x_, v)[0])(xd)
+
+    _, dtdt = jax.jvp(dT_dxd, (x,), (xd,))
+    dL = jax.grad(lambda x_: _effect_energy(model, x_, xd)[1] - _effect_energy(model, x_, xd)[0])(x)
+    h = h + dtdt + dL
+    for e, s in zip(model.effects, lay.slots):
+        h = h - e.generalized_force(r, s, t, x, xd, z)
+    return h
+
+
+def input_matrix(model: Model):
+    """Input matrix B (nx, n): by default each joint's actuator drives its joint coordinate."""
+    r, lay = model.rigid, model.layout
+    B = jnp.zeros((lay.nx, r.nq)).at[jnp.arange(r.nq), jnp.arange(r.nq)].set(1.0)
+    for e, s in zip(model.effects, lay.slots):
+        B = e.actuation(r, s, B)
+    return B
+
+
+def state_rate(model: Model, t, x, xd, z):
+    """Time derivative of the internal states, shape (nz,)."""
+    r, lay = model.rigid, model.layout
+    parts = [e.state_rate(r, s, t, x, xd, z) for e, s in zip(model.effects, lay.slots)]
+    return jnp.concatenate(parts) if parts else jnp.zeros(0)
+
+
+def initial_state(model: Model):
+    """Initial internal states z0 (nz,)."""
+    r, lay = model.rigid, model.layout
+    parts = [e.initial_state(r, s) for e, s in zip(model.effects, lay.slots)]
+    return jnp.concatenate(parts) if parts else jnp.zeros(0)
+
+
+def model_forward_dynamics(model: Model, t, x, xd, z, u):
+    """``(xdd, zd)`` of the model under actuator input ``u`` (n,)."""
+    _check(model, x, "x")
+    _check(model, xd, "xd")
+    M = mass_matrix(model, x)
+    rhs = input_matrix(model) @ u - bias_forces(model, t, x, xd, z)
+    L = jnp.linalg.cholesky(M)
+    xdd = jax.scipy.linalg.cho_solve((L, True), rhs)
+    return xdd, state_rate(model, t, x, xd, z)
+
+
+def model_inverse_dynamics(model: Model, t, x, xd, xdd, z):
+    """Generalised forces ``M xdd + h - sum f_e`` (nx,) needed for the motion (x, xd, xdd)."""
+    return mass_matrix(model, x) @ xdd + bias_forces(model, t, x, xd, z)
+
+
+class Linearization(NamedTuple):
+    """``M xdd + C xd + K x = B u`` about a posture, over the coordinates ``names``."""
+
+    M: jnp.ndarray
+    C: jnp.ndarray
+    K: jnp.ndarray
+    B: jnp.ndarray
+    names: tuple[str, ...]
+    keep: tuple[int, ...]
+
+
+def linearize(model: Model, x0, *, hold: tuple[str, ...] | tuple[int, ...] = (), t=0.0) -> Linearization:
+    """Linearise the model about the static posture ``x0`` (xd = 0).
+
+    ``K = d(h - f)/dx`` (gravity stiffness included), ``C = d(h - f)/dxd``, ``M = M(x0)``.
+    ``hold`` names coordinates clamped to x0 (e.g. the motor angles under perfect position
+    control): their rows and columns are removed.
+    """
+    _check(model, x0, "x0")
+    lay = model.layout
+    x0 = jnp.asarray(x0)
+    zero = jnp.zeros_like(x0)
+    z0 = initial_state(model)
+    held = set()
+    for h in hold:
+        if isinstance(h, str):
+            if h not in lay.coord_names:
+                raise ShapeError(f"linearize: unknown coordinate '{h}' in hold; coordinates: {list(lay.coord_names)}")
+            held.add(lay.coord_names.index(h))
+        else:
+            held.add(int(h))
+    keep = tuple(i for i in range(lay.nx) if i not in held)
+    idx = jnp.array(keep, dtype=int)
+    M = mass_matrix(model, x0)
+    K = jax.jacfwd(lambda x: bias_forces(model, t, x, zero, z0))(x0)
+    C = jax.jacfwd(lambda v: bias_forces(model, t, x0, v, z0))(zero)
+    B = input_matrix(model)
+    sel = lambda A: A[jnp.ix_(idx, idx)]
+    return Linearization(sel(M), sel(C), sel(K), B[idx], tuple(lay.coord_names[i] for i in keep), keep)
+
+
+def dynamic_stiffness(model: Model, x0, omega, *, hold=()):
+    """Complex dynamic stiffness ``K - omega^2 M + i omega C`` (+ frequency-dependent effect terms)
+    at one angular frequency ``omega`` [rad/s], over the kept coordinates."""
+    lin = linearize(model, x0, hold=hold)
+    D = lin.K - omega**2 * lin.M + 1j * omega * lin.C
+    r, lay = model.rigid, model.layout
+    idx = jnp.array(lin.keep, dtype=int)
+    for e, s in zip(model.effects, lay.slots):
+        extra = e.dynamic_stiffness(r, s, jnp.asarray(x0), omega)
+        if extra is not None:
+            D = D + extra[jnp.ix_(idx, idx)]
+    return D
+
+
+def gravity_stiffness(robot: Robot, q):
+    """``dG/dq`` (n, n) of the rigid robot by automatic differentiation."""
+    return jax.jacfwd(lambda q_: gravity(robot, q_))(jnp.asarray(q))
