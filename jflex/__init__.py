@@ -65,3 +65,9 @@ from ._model import (
     model_inverse_dynamics as model_inverse_dynamics,
     state_rate as state_rate,
 )
+from ._sweep import sweep as sweep
+from ._config import (
+    available_robots as available_robots,
+    load_robot as load_robot,
+    robot_from_config as robot_from_config,
+)

@@ -1,0 +1,230 @@
+"""YAML robot configs -> validated :class:`Robot` objects, with errors that name the field.
+
+A robot file (``configs/robots/*.yaml``) holds either a DH table or a URDF reference::
+
+    name: staubli_tx200
+    dh:
+      convention: modified          # or standard
+      columns: [alpha, a, d, theta] # the order of each row (any permutation of these four)
+      angles: deg                   # unit of alpha and theta: deg or rad
+      rows:
+        - [0, 0, 0.642, 0]
+        - [90, 0.25, 0, 0]
+      joint_types: [revolute, revolute]    # optional, default revolute
+      tool: [0, 0.994, 0, 0]               # optional DH row of the tool frame (same columns)
+    joint_names: [j1, j2]                  # optional
+    limits: {lower: [...], upper: [...], velocity: [...], effort: [...], angles: deg}  # optional
+    links:                                 # optional inertials in each link's DH frame
+      - {mass: 10.0, com: [0, 0, 0.1], inertia: [Ixx, Ixy, Iyy, Ixz, Iyz, Izz]}
+    gravity: [0, 0, -9.81]
+
+or ``urdf: path/to/robot.urdf`` (relative to the YAML file).
+"""
+
+from __future__ import annotations
+
+import numbers
+import os
+import pathlib
+from typing import Any
+
+import numpy as np
+
+from ._dh import from_dh
+from ._errors import ConfigError, JFlexError
+from ._robot import Robot
+from ._runs import load_yaml
+from ._urdf import load_urdf
+
+_COLUMNS = ("alpha", "a", "d", "theta")
+
+
+def config_dirs() -> list[pathlib.Path]:
+    """Folders searched for robot names: ``$JFLEX_CONFIGS/robots``, ``./configs/robots`` and the
+    ``configs/robots`` of the source tree jflex was installed from."""
+    dirs = []
+    if os.environ.get("JFLEX_CONFIGS"):
+        dirs.append(pathlib.Path(os.environ["JFLEX_CONFIGS"]) / "robots")
+    dirs.append(pathlib.Path.cwd() / "configs" / "robots")
+    dirs.append(pathlib.Path(__file__).resolve().parent.parent / "configs" / "robots")
+    return dirs
+
+
+def _example_robot_urdf(name: str) -> pathlib.Path | None:
+    rel = {
+        "panda": "panda_description/urdf/panda.urdf",
+        "ur5": "ur_description/urdf/ur5_robot.urdf",
+    }.get(name)
+    if rel is None:
+        return None
+    import importlib.metadata as md
+
+    try:
+        files = md.files("example-robot-data") or []
+    except md.PackageNotFoundError:
+        return None
+    for f in files:
+        if str(f).replace("\\", "/").endswith("robots/" + rel):
+            path = pathlib.Path(f.locate())
+            if path.is_file():
+                return path
+    return None
+
+
+def available_robots() -> list[str]:
+    """Names accepted by :func:`load_robot` besides paths."""
+    names = set()
+    for d in config_dirs():
+        if d.is_dir():
+            names.update(p.stem for p in d.glob("*.yaml"))
+    for extra in ("panda", "ur5"):
+        if _example_robot_urdf(extra) is not None:
+            names.add(extra)
+    return sorted(names)
+
+
+def load_robot(spec: str | os.PathLike | dict) -> Robot:
+    """A :class:`Robot` from a YAML file, a URDF file, a config name (``"staubli_tx200"``, or
+    ``"panda"``/``"ur5"`` when ``example-robot-data`` is installed) or an already-parsed mapping."""
+    if isinstance(spec, dict):
+        return robot_from_config(spec, where="<config>")
+    s = str(spec)
+    path = pathlib.Path(s)
+    if path.suffix.lower() == ".urdf":
+        return load_urdf(path)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        return robot_from_config(load_yaml(path), where=str(path), base=path.parent)
+    for d in config_dirs():
+        cand = d / f"{s}.yaml"
+        if cand.is_file():
+            return robot_from_config(load_yaml(cand), where=str(cand), base=cand.parent)
+    urdf = _example_robot_urdf(s)
+    if urdf is not None:
+        return load_urdf(urdf)
+    raise ConfigError(f"unknown robot '{s}': not a .yaml/.urdf path, and not one of {available_robots()}")
+
+
+def _numbers(value: Any, where: str, shape=None) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: expected numbers, got {value!r}") from None
+    if shape is not None and arr.shape != shape:
+        raise ConfigError(f"{where}: expected shape {shape}, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ConfigError(f"{where}: contains NaN or inf")
+    return arr
+
+
+def _angle_unit(cfg, where, default="rad"):
+    unit = cfg.get("angles", default)
+    if unit not in ("deg", "rad"):
+        raise ConfigError(f"{where}.angles: expected 'deg' or 'rad', got {unit!r}")
+    return np.pi / 180.0 if unit == "deg" else 1.0
+
+
+def robot_from_config(cfg: dict, where: str = "<config>", base: pathlib.Path | None = None) -> Robot:
+    """Validate a robot config mapping and build the :class:`Robot` (see module docstring)."""
+    try:
+        return _robot_from_config(cfg, where, base)
+    except JFlexError:
+        raise
+    except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
+        # Anything the explicit checks missed still reaches the user as a config error.
+        raise ConfigError(f"{where}: invalid robot config ({type(exc).__name__}: {exc})") from None
+
+
+def _robot_from_config(cfg, where, base):
+    if not isinstance(cfg, dict):
+        raise ConfigError(f"{where}: expected a mapping, got {type(cfg).__name__}")
+    known = {"name", "source", "notes", "dh", "urdf", "joint_names", "limits", "links", "gravity", "units"}
+    unknown = set(cfg) - known
+    if unknown:
+        raise ConfigError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(known)}")
+    gravity = _numbers(cfg.get("gravity", [0.0, 0.0, -9.81]), f"{where}.gravity", (3,))
+    if ("dh" in cfg) == ("urdf" in cfg):
+        raise ConfigError(f"{where}: needs exactly one of 'dh' (a DH table) or 'urdf' (a file path)")
+    if "urdf" in cfg:
+        if not isinstance(cfg["urdf"], str):
+            raise ConfigError(f"{where}.urdf: expected a file path, got {cfg['urdf']!r}")
+        path = pathlib.Path(cfg["urdf"])
+        if not path.is_absolute() and base is not None:
+            path = base / path
+        return load_urdf(path, gravity=gravity)
+
+    dh = cfg["dh"]
+    if not isinstance(dh, dict):
+        raise ConfigError(f"{where}.dh: expected a mapping with 'rows', got {type(dh).__name__}")
+    cols = dh.get("columns", list(_COLUMNS))
+    if not isinstance(cols, list) or sorted(map(str, cols)) != sorted(_COLUMNS):
+        raise ConfigError(f"{where}.dh.columns: expected a permutation of {list(_COLUMNS)}, got {cols!r}")
+    order = [cols.index(c) for c in _COLUMNS]
+    rows = dh.get("rows")
+    if not isinstance(rows, list) or not rows:
+        raise ConfigError(f"{where}.dh.rows: expected a non-empty list of rows [{', '.join(cols)}]")
+    for i, row in enumerate(rows):
+        if not isinstance(row, list) or len(row) != 4:
+            raise ConfigError(
+                f"{where}.dh.rows[{i}]: expected 4 columns [{', '.join(map(str, cols))}], got {row!r}"
+            )
+        for v in row:
+            if not isinstance(v, numbers.Real) or isinstance(v, bool):
+                raise ConfigError(f"{where}.dh.rows[{i}]: expected numbers, got {row!r}")
+    scale = _angle_unit(dh, f"{where}.dh")
+    tab = _numbers(rows, f"{where}.dh.rows")[:, order]
+    tab[:, [0, 3]] *= scale
+    n = tab.shape[0]
+    tool = dh.get("tool")
+    if tool is not None:
+        tool = _numbers(tool, f"{where}.dh.tool", (4,))[order]
+        tool[[0, 3]] *= scale
+    convention = dh.get("convention", "modified")
+    if convention not in ("modified", "standard"):
+        raise ConfigError(f"{where}.dh.convention: expected 'modified' (Craig) or 'standard', got {convention!r}")
+    jt = dh.get("joint_types")
+    if jt is not None and (not isinstance(jt, list) or len(jt) != n):
+        raise ConfigError(f"{where}.dh.joint_types: expected a list of {n} entries, got {jt!r}")
+    names = cfg.get("joint_names")
+    if names is not None and (not isinstance(names, list) or len(names) != n or not all(isinstance(s, str) for s in names)):
+        raise ConfigError(f"{where}.joint_names: expected a list of {n} strings, got {names!r}")
+    links = cfg.get("links")
+    if links is not None:
+        if not isinstance(links, list) or len(links) != n:
+            raise ConfigError(f"{where}.links: expected a list of {n} link inertials, got {links!r}")
+        for i, ln in enumerate(links):
+            if not isinstance(ln, dict):
+                raise ConfigError(f"{where}.links[{i}]: expected a mapping {{mass, com, inertia}}, got {ln!r}")
+            if "params" not in ln and "mass" not in ln:
+                raise ConfigError(f"{where}.links[{i}]: needs 'mass' (kg), or 'params' (10 numbers)")
+            if "mass" in ln:
+                m = _numbers(ln["mass"], f"{where}.links[{i}].mass", ())
+                if m < 0:
+                    raise ConfigError(f"{where}.links[{i}].mass: must be >= 0 kg, got {float(m)}")
+    lim = cfg.get("limits", {}) or {}
+    if not isinstance(lim, dict):
+        raise ConfigError(f"{where}.limits: expected a mapping, got {lim!r}")
+    lscale = _angle_unit(lim, f"{where}.limits")
+    types = [str(t).lower() for t in (jt or ["revolute"] * n)]
+    ang = np.array([lscale if t in ("revolute", "r") else 1.0 for t in types])
+
+    def lim_arr(key):
+        if key not in lim:
+            return None
+        return _numbers(lim[key], f"{where}.limits.{key}", (n,)) * (ang if key in ("lower", "upper", "velocity") else 1.0)
+
+    try:
+        return from_dh(
+            tab,
+            convention=convention,
+            joint_types=jt,
+            tool=tool,
+            inertias=links,
+            gravity=gravity,
+            joint_names=names,
+            lower=lim_arr("lower"),
+            upper=lim_arr("upper"),
+            velocity_limit=lim_arr("velocity"),
+            effort_limit=lim_arr("effort"),
+        )
+    except JFlexError as exc:
+        raise ConfigError(f"{where}: {exc}") from None

@@ -1,0 +1,98 @@
+"""Rigid-body algorithms against Pinocchio (float64, 1e-9 relative) on the UR5 and Panda URDFs of
+example-robot-data and on random robots (hypothesis)."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import jflex
+from _references import dh_chain, pin, pin_model_from_robot, random_inertia_params
+
+pytestmark = pytest.mark.skipif(pin is None, reason="needs the test extra 'pin'")
+
+RTOL = 1e-9
+
+
+def close(a, b, rtol=RTOL):
+    a, b = np.asarray(a), np.asarray(b)
+    b = b.reshape(a.shape)  # Pinocchio drops singleton axes for 1-joint robots
+    scale = max(1.0, np.abs(b).max())
+    np.testing.assert_allclose(a, b, rtol=0, atol=rtol * scale)
+
+
+def _sym(M):
+    return np.triu(M) + np.triu(M, 1).T
+
+
+def compare_all(robot, model, rng, frame=None):
+    data = model.createData()
+    n = robot.nq
+    lo = np.where(np.isfinite(robot.lower), robot.lower, -np.pi)
+    hi = np.where(np.isfinite(robot.upper), robot.upper, np.pi)
+    q = rng.uniform(lo, hi)
+    qd, qdd = rng.normal(size=n), rng.normal(size=n)
+    fext = rng.normal(size=(n, 6))
+    tau = pin.rnea(model, data, q, qd, qdd)
+    close(jflex.rnea(robot, q, qd, qdd), tau)
+    pin_f = [pin.Force.Zero()] + [pin.Force(f[:3], f[3:]) for f in fext]
+    close(jflex.rnea(robot, q, qd, qdd, f_ext=fext), pin.rnea(model, data, q, qd, qdd, pin_f))
+    close(jflex.crba(robot, q), _sym(pin.crba(model, data, q)))
+    close(jflex.nonlinear_effects(robot, q, qd), pin.nonLinearEffects(model, data, q, qd))
+    close(jflex.gravity(robot, q), pin.computeGeneralizedGravity(model, data, q))
+    close(jflex.aba(robot, q, qd, tau), pin.aba(model, data, q, qd, tau))
+    close(jflex.forward_dynamics(robot, q, qd, tau, method="crba"), qdd)
+    close(jflex.aba(robot, q, qd, tau, f_ext=fext), pin.aba(model, data, q, qd, tau, pin_f))
+    close(jflex.regressor(robot, q, qd, qdd), pin.computeJointTorqueRegressor(model, data, q, qd, qdd))
+    close(jflex.kinetic_energy(robot, q, qd), pin.computeKineticEnergy(model, data, q, qd))
+    close(jflex.potential_energy(robot, q), pin.computePotentialEnergy(model, data, q))
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    T = jflex.forward_kinematics(robot, q)
+    for i in range(n):
+        close(T[i], data.oMi[i + 1].homogeneous)
+    pin.computeJointJacobians(model, data, q)
+    for i in range(n):
+        for ref, pref in [("local", pin.LOCAL), ("world", pin.WORLD), ("local_world_aligned", pin.LOCAL_WORLD_ALIGNED)]:
+            close(jflex.jacobian(robot, q, i, reference=ref), pin.getJointJacobian(model, data, i + 1, pref))
+    if frame is not None:
+        fid = model.getFrameId(frame)
+        close(jflex.frame_placement(robot, q, frame), data.oMf[fid].homogeneous)
+        J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+        close(jflex.jacobian(robot, q, frame), J)
+
+
+@pytest.mark.parametrize("name,frame", [("ur5", "tool0"), ("panda", "panda_hand")])
+def test_urdf_robots_match_pinocchio(name, frame):
+    if name not in jflex.available_robots():
+        pytest.skip("example-robot-data not installed")
+    from jflex._config import _example_robot_urdf
+
+    path = str(_example_robot_urdf(name))
+    robot = jflex.load_urdf(path)
+    model = pin.buildModelFromUrdf(path)
+    assert robot.joint_names == tuple(model.names[1:])
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        compare_all(robot, model, rng, frame=frame)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 7), standard=st.booleans())
+def test_random_dh_robots_match_pinocchio(seed, n, standard):
+    rng = np.random.default_rng(seed)
+    table = np.column_stack(
+        [rng.uniform(-np.pi, np.pi, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-np.pi, np.pi, n)]
+    )
+    types = list(rng.choice(["revolute", "prismatic"], n))
+    convention = "standard" if standard else "modified"
+    inert = [random_inertia_params(rng) for _ in range(n)]
+    robot = jflex.from_dh(table, convention=convention, joint_types=types, inertias=inert, tool=[0.1, 0.2, 0.3, 0.4])
+    compare_all(robot, pin_model_from_robot(robot), rng)
+    # the DH builder itself, against the textbook DH product
+    q = rng.uniform(-1, 1, n)
+    frames = dh_chain(table, q, types, convention)
+    if convention == "modified":
+        close(jflex.forward_kinematics(robot, q), np.stack(frames))
+    else:
+        for i in range(n):
+            close(jflex.frame_placement(robot, q, f"dh{i + 1}"), frames[i])
