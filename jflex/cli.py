@@ -1,0 +1,180 @@
+"""The ``jflex`` command. Every subcommand takes a YAML config (with a default), accepts
+``--out DIR`` and writes ``DIR/results.json`` plus its plots (see :mod:`jflex._runs`)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import pathlib
+import sys
+
+import numpy as np
+
+from ._config import available_robots, config_dirs, load_robot, robot_from_config
+from ._errors import JFlexError
+from ._runs import load_yaml, make_run_dir, write_results
+
+_REPO = pathlib.Path(__file__).resolve().parent.parent
+
+
+def _default_config(name: str) -> pathlib.Path:
+    for base in (pathlib.Path.cwd() / "configs", _REPO / "configs"):
+        if (base / name).is_file():
+            return base / name
+    return _REPO / "configs" / name
+
+
+def cmd_info(args) -> int:
+    robot = load_robot(args.robot)
+    print(f"robot: {args.robot}   joints: {robot.nq}   base: {robot.base_name}")
+    print(f"gravity: {np.asarray(robot.gravity).tolist()} m/s^2")
+    hdr = f"{'#':>2} {'joint':<22} {'type':<9} {'parent':<18} {'lower':>9} {'upper':>9} {'vel':>8} {'effort':>8} {'mass[kg]':>9}"
+    print(hdr)
+    print("-" * len(hdr))
+    for i in range(robot.nq):
+        rev = robot.joint_types[i] == "revolute"
+        conv = np.rad2deg if rev else (lambda x: x)
+        par = robot.link_names[robot.parents[i]] if robot.parents[i] >= 0 else robot.base_name
+        lo, hi = conv(float(robot.lower[i])), conv(float(robot.upper[i]))
+        print(
+            f"{i:>2} {robot.joint_names[i]:<22} {robot.joint_types[i]:<9} {par:<18} {lo:>9.4g} {hi:>9.4g} "
+            f"{float(robot.velocity_limit[i]):>8.4g} {float(robot.effort_limit[i]):>8.4g} {float(robot.inertia[i, 0]):>9.4g}"
+        )
+    print("(limits in deg for revolute joints, m for prismatic; velocity in rad/s or m/s; effort in N m or N)")
+    print(f"total mass: {float(np.sum(robot.inertia[:, 0])):.4g} kg")
+    if robot.frame_names:
+        print("frames: " + ", ".join(robot.frame_names))
+    return 0
+
+
+def run_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
+    """Gravity torques and mass-matrix conditioning over a (q2, q3) grid of the demo arm."""
+    import jax
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from . import _dynamics as dyn
+    from ._sweep import sweep
+
+    spec = cfg.get("robot", "staubli_tx200")
+    robot_cfg = None
+    for d in config_dirs():
+        if (d / f"{spec}.yaml").is_file():
+            robot_cfg = load_yaml(d / f"{spec}.yaml")
+            break
+    if robot_cfg is not None and "links" in cfg:
+        robot_cfg["links"] = cfg["links"]
+        robot = robot_from_config(robot_cfg, where=f"demo robot '{spec}'")
+    else:
+        robot = load_robot(spec)
+    g = cfg.get("grid", {})
+    n = int(g.get("n", 61))
+    q2 = np.deg2rad(np.linspace(*g.get("q2_deg", [-120, 120]), n))
+    q3 = np.deg2rad(np.linspace(*g.get("q3_deg", [-140, 140]), n))
+    Q2, Q3 = np.meshgrid(q2, q3, indexing="ij")
+    q = np.zeros((n * n, robot.nq))
+    q[:, 1], q[:, 2] = Q2.ravel(), Q3.ravel()
+
+    def one(qi):
+        M = dyn.crba(robot, qi)
+        ev = jax.numpy.linalg.eigvalsh(M)
+        return {"g": dyn.gravity(robot, qi), "cond": ev[-1] / ev[0], "tip": dyn.frame_placement(robot, qi, "tool")[:3, 3]}
+
+    out = sweep(one, q, chunk_size=1024, label="demo sweep")
+    G = out["g"].reshape(n, n, robot.nq)
+    cond = out["cond"].reshape(n, n)
+    fig, axs = plt.subplots(1, 3, figsize=(15, 4.2))
+    ext = [np.rad2deg(q3[0]), np.rad2deg(q3[-1]), np.rad2deg(q2[0]), np.rad2deg(q2[-1])]
+    for k, (ax, data, title) in enumerate(
+        zip(axs, [G[..., 1], G[..., 2], np.log10(cond)], ["gravity torque joint 2 [N m]", "gravity torque joint 3 [N m]", "log10 cond M(q)"])
+    ):
+        im = ax.imshow(data, origin="lower", extent=ext, aspect="auto", cmap="viridis")
+        ax.set_xlabel("q3 [deg]")
+        ax.set_ylabel("q2 [deg]")
+        ax.set_title(title)
+        fig.colorbar(im, ax=ax)
+    fig.tight_layout()
+    fig.savefig(run_dir / "gravity_maps.png", dpi=110)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(5, 5))
+    tip = out["tip"]
+    ax.scatter(np.hypot(tip[:, 0], tip[:, 1]) * np.sign(tip[:, 0]), tip[:, 2], c=np.abs(out["g"][:, 1]), s=3)
+    ax.set_xlabel("reach [m]")
+    ax.set_ylabel("height [m]")
+    ax.set_title("tool positions, colour |g2|")
+    ax.set_aspect("equal")
+    fig.savefig(run_dir / "workspace.png", dpi=110)
+    plt.close(fig)
+    i2 = np.unravel_index(np.argmax(np.abs(G[..., 1])), G.shape[:2])
+    return {
+        "robot": spec,
+        "grid_points": n * n,
+        "max_abs_gravity_torque_Nm": np.abs(out["g"]).max(axis=0),
+        "worst_posture_joint2_deg": [0.0, float(np.rad2deg(q2[i2[0]])), float(np.rad2deg(q3[i2[1]]))],
+        "mass_matrix_condition_max": float(cond.max()),
+        "mass_matrix_condition_min": float(cond.min()),
+        "plots": ["gravity_maps.png", "workspace.png"],
+    }
+
+
+def _run(name, default, fn, args) -> int:
+    cfg = load_yaml(args.config or default)
+    run_dir = make_run_dir(name, args.out)
+    results = dict(fn(cfg, run_dir))
+    results.setdefault("config", str(args.config or default))
+    write_results(run_dir, results)
+    print(f"{name}: results in {run_dir / 'results.json'}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    return _run("demo", _default_config("demo.yaml"), run_demo, args)
+
+
+def cmd_run(args) -> int:
+    """Run ``experiments/<name>.py`` with the remaining arguments."""
+    for base in (pathlib.Path.cwd() / "experiments", _REPO / "experiments"):
+        path = base / f"{args.experiment}.py"
+        if path.is_file():
+            break
+    else:
+        raise JFlexError(f"no experiment '{args.experiment}' in experiments/")
+    spec = importlib.util.spec_from_file_location(f"jflex_experiment_{args.experiment}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    if not hasattr(mod, "main"):
+        raise JFlexError(f"{path}: an experiment script must define main(argv)")
+    mod.main(args.rest)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="jflex", description="Differentiable dynamics of flexible manipulators (JAX).")
+    sub = p.add_subparsers(dest="command", required=True)
+    pi = sub.add_parser("info", help="print joints, limits and masses of a robot")
+    pi.add_argument("robot", help=f"YAML/URDF path or a name ({', '.join(available_robots())})")
+    pi.set_defaults(fn=cmd_info)
+    pd = sub.add_parser("demo", help="run the main job on the built-in example")
+    pd.add_argument("config", nargs="?", default=None, help="YAML config (default: configs/demo.yaml)")
+    pd.add_argument("--out", default=None, help="run folder (default: runs/demo-<time>)")
+    pd.set_defaults(fn=cmd_demo)
+    pr = sub.add_parser("run", help="run an experiment script from experiments/")
+    pr.add_argument("experiment")
+    pr.add_argument("rest", nargs=argparse.REMAINDER)
+    pr.set_defaults(fn=cmd_run)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.fn(args)
+    except JFlexError as exc:
+        print(f"jflex: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
