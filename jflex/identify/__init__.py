@@ -1,0 +1,26 @@
+"""Identification: equation-error (regressor least squares, base parameters, excitation design,
+physically consistent estimates) and output-error fits with optimistix, plus EMA helpers."""
+
+from ._data import (
+    check_finite as check_finite,
+    check_lengths as check_lengths,
+    check_shape as check_shape,
+    check_time as check_time,
+    load_npz as load_npz,
+)
+from ._signal import fft_lowpass as fft_lowpass, spectral_derivatives as spectral_derivatives
+from ._regressor import Regressor as Regressor, random_samples as random_samples
+from ._base_params import BaseParameters as BaseParameters, base_parameters as base_parameters
+from ._ls import LSResult as LSResult, instrumental_variables as instrumental_variables, ols as ols, wls as wls
+from ._physical import (
+    PhysicalResult as PhysicalResult,
+    inertia_to_log_cholesky as inertia_to_log_cholesky,
+    is_consistent as is_consistent,
+    log_cholesky_to_inertia as log_cholesky_to_inertia,
+    physical_fit as physical_fit,
+)
+from ._excitation import (
+    ExcitationResult as ExcitationResult,
+    FourierTrajectory as FourierTrajectory,
+    design_excitation as design_excitation,
+)
