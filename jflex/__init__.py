@@ -71,3 +71,11 @@ from ._config import (
     load_robot as load_robot,
     robot_from_config as robot_from_config,
 )
+from . import linear as linear
+from .linear import (
+    frf as frf,
+    mac as mac,
+    modal_analysis as modal_analysis,
+    stability_lobes as stability_lobes,
+    track_modes as track_modes,
+)

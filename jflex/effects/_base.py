@@ -57,6 +57,12 @@ class AbstractEffect(eqx.Module):
         """Initial internal states, shape (len(state_names),)."""
         return jnp.zeros(len(self.state_names(robot)))
 
+    def coords_at_posture(self, robot, slots: Slots, q):
+        """This effect's coordinates when the robot rests at joint posture ``q`` (n,) with its
+        elastic elements unloaded (e.g. motor angles equal to link angles); used to expand a
+        posture into a full x0 for linearisation. Default: zeros."""
+        return jnp.zeros(len(self.coord_names(robot)))
+
     def kinetic_energy(self, robot, slots: Slots, x, xd):
         """Extra kinetic energy [J] (rotor inertia, link deformation, ...). Default 0."""
         return jnp.zeros(())

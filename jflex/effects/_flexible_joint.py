@@ -1,0 +1,217 @@
+"""Flexible joints: a torsion spring and damper between each link and its motor (seed 003 Eq. 2.8,
+seed 000 "serial system dynamics with flexible joints").
+
+The effect adds one motor coordinate ``theta_<joint>`` per flexible joint: the rotor angle
+*after* the gear (rotor angle / r), so the spring torque is ``K (q - theta)`` and the reflected
+rotor inertia is ``r^2 I_m``. With ``coupling=True`` (the full model of seed 000) each rotor
+spins on the link that carries it, with absolute spin rate ``r theta_dot + z . omega_parent``:
+
+$$ T_m = \\tfrac12 \\sum_i I_{m,i} (r_i \\dot\\theta_i + z_i\\cdot\\omega_{p(i)})^2, $$
+
+which yields the inertial coupling ``S(q)`` between link and motor accelerations and a small
+posture-dependent link inertia. ``coupling=False`` is the reduced (Spong) model,
+``T_m = 1/2 sum r_i^2 I_m,i theta_dot_i^2``. Rotor mass and transverse inertia are taken as part
+of the carrying link's inertial parameters (they move with it), as the base parameters of
+seed 003 Table A.2 do.
+
+The actuators move from the link coordinates to the motor coordinates (``actuation``), so
+``jflex.model_forward_dynamics`` / ``model_inverse_dynamics`` of a model with this effect are
+the forward / inverse dynamics of the augmented system ``[q, theta]``.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import ParameterError, ShapeError
+from .._robot import REVOLUTE
+from .._tree import forward_pass
+from ._base import AbstractEffect, Slots
+
+
+def _concrete(x):
+    """NumPy value of ``x``, or None when it is traced (checks then happen in jit via error_if)."""
+    try:
+        return np.asarray(x, dtype=float)
+    except Exception:  # a tracer: value checks are skipped, shapes were checked at build time
+        return None
+
+
+def _smooth_sign(v, v_s):
+    # tanh keeps the force differentiable; v_s sets the width of the transition
+    return jnp.tanh(v / v_s)
+
+
+class FlexibleJoints(AbstractEffect):
+    """Torsion spring + damper between link and motor at the selected joints.
+
+    **Fields** (``m`` flexible joints; every number an array leaf):
+
+    - ``joints``: static tuple of the robot joint indices that are flexible (order of theta).
+    - ``stiffness``: (m,) diagonal or (m, m) symmetric positive-definite K [N m/rad].
+    - ``damping``: (m,) or (m, m) joint damping B between link and motor [N m s/rad].
+    - ``rotor_inertia``: (m,) rotor spin inertia I_m^zz on the motor side of the gear [kg m^2].
+    - ``gear_ratio``: (m,) r (motor angle / joint angle) [-].
+    - ``link_viscous``, ``link_coulomb``: (m,) link-side friction F_vq [N m s/rad], F_sq [N m].
+    - ``motor_viscous``, ``motor_coulomb``: (m,) motor-side friction (after the gear) F_vm, F_sm.
+    - ``coulomb_velocity``: () smoothing velocity of the Coulomb terms [rad/s] (tanh(v / v_s)).
+    - ``coupling``: static; True for the full model with S(q), False for the reduced Spong model.
+
+    Note: a smooth Coulomb term linearises at rest to a viscous coefficient F_s / v_s; set the
+    Coulomb coefficients to 0 for a modal analysis in the sense of seed 003 (Coulomb neglected).
+    """
+
+    stiffness: jnp.ndarray
+    damping: jnp.ndarray
+    rotor_inertia: jnp.ndarray
+    gear_ratio: jnp.ndarray
+    link_viscous: jnp.ndarray
+    link_coulomb: jnp.ndarray
+    motor_viscous: jnp.ndarray
+    motor_coulomb: jnp.ndarray
+    coulomb_velocity: jnp.ndarray
+    joints: tuple[int, ...] = eqx.field(static=True)
+    coupling: bool = eqx.field(static=True, default=True)
+
+    def __init__(
+        self,
+        stiffness,
+        damping=None,
+        rotor_inertia=None,
+        gear_ratio=None,
+        *,
+        joints: Sequence[int] | None = None,
+        link_viscous=None,
+        link_coulomb=None,
+        motor_viscous=None,
+        motor_coulomb=None,
+        coulomb_velocity=1e-3,
+        coupling: bool = True,
+    ):
+        K = jnp.asarray(stiffness, dtype=float)
+        if K.ndim not in (1, 2):
+            raise ShapeError(f"FlexibleJoints.stiffness: expected (m,) or (m, m) [N m/rad], got shape {K.shape}")
+        m = K.shape[0]
+        if K.ndim == 2 and K.shape != (m, m):
+            raise ShapeError(f"FlexibleJoints.stiffness: a matrix must be square, got shape {K.shape}")
+        self.joints = tuple(range(m)) if joints is None else tuple(int(j) for j in joints)
+        if len(self.joints) != m:
+            raise ShapeError(f"FlexibleJoints.joints: {len(self.joints)} joints but stiffness has {m} rows")
+        if len(set(self.joints)) != m or min(self.joints, default=0) < 0:
+            raise ShapeError(f"FlexibleJoints.joints: expected distinct non-negative joint indices, got {self.joints}")
+
+        def vec(x, name, default):
+            a = jnp.full((m,), default, dtype=float) if x is None else jnp.asarray(x, dtype=float)
+            if a.shape == ():
+                a = jnp.full((m,), a)
+            if a.shape != (m,):
+                raise ShapeError(f"FlexibleJoints.{name}: expected shape ({m},), got {a.shape}")
+            return a
+
+        D = jnp.zeros(m) if damping is None else jnp.asarray(damping, dtype=float)
+        if D.shape not in ((m,), (m, m)):
+            raise ShapeError(f"FlexibleJoints.damping: expected ({m},) or ({m}, {m}) [N m s/rad], got {D.shape}")
+        self.stiffness = K
+        self.damping = D
+        self.rotor_inertia = vec(rotor_inertia, "rotor_inertia", 0.0)
+        self.gear_ratio = vec(gear_ratio, "gear_ratio", 1.0)
+        self.link_viscous = vec(link_viscous, "link_viscous", 0.0)
+        self.link_coulomb = vec(link_coulomb, "link_coulomb", 0.0)
+        self.motor_viscous = vec(motor_viscous, "motor_viscous", 0.0)
+        self.motor_coulomb = vec(motor_coulomb, "motor_coulomb", 0.0)
+        self.coulomb_velocity = jnp.asarray(coulomb_velocity, dtype=float)
+        self.coupling = bool(coupling)
+
+    def __check_init__(self):
+        K = _concrete(self.stiffness)
+        if K is not None:
+            if K.ndim == 1 and not np.all(K > 0):
+                bad = [self.joints[i] for i in np.flatnonzero(~(K > 0))]
+                raise ParameterError(
+                    f"FlexibleJoints.stiffness: every joint stiffness must be > 0 [N m/rad]; joints {bad} have "
+                    f"{K[~(K > 0)].tolist()} (a rigid joint is simply left out of `joints`)"
+                )
+            if K.ndim == 2:
+                if not np.allclose(K, K.T, rtol=1e-10, atol=0):
+                    raise ParameterError("FlexibleJoints.stiffness: the stiffness matrix must be symmetric")
+                if not np.all(np.isfinite(K)) or np.linalg.eigvalsh(K).min() <= 0:
+                    raise ParameterError("FlexibleJoints.stiffness: the stiffness matrix must be positive definite")
+        for name in ("damping", "rotor_inertia", "link_viscous", "link_coulomb", "motor_viscous", "motor_coulomb"):
+            a = _concrete(getattr(self, name))
+            if a is not None and not (np.all(np.isfinite(a)) and np.all(np.diagonal(a) >= 0 if a.ndim == 2 else a >= 0)):
+                raise ParameterError(f"FlexibleJoints.{name}: must be finite and >= 0, got {a.tolist()}")
+        r = _concrete(self.gear_ratio)
+        if r is not None and not np.all(r > 0):
+            raise ParameterError(f"FlexibleJoints.gear_ratio: must be > 0, got {r.tolist()}")
+        vs = _concrete(self.coulomb_velocity)
+        if vs is not None and not vs > 0:
+            raise ParameterError(f"FlexibleJoints.coulomb_velocity: must be > 0 [rad/s], got {vs}")
+
+    # -- helpers -------------------------------------------------------------------------------
+    def _check_robot(self, robot):
+        for j in self.joints:
+            if j >= robot.nq:
+                raise ShapeError(f"FlexibleJoints.joints: joint index {j} out of range for a robot with {robot.nq} joints")
+            if self.coupling and robot.joint_types[j] != REVOLUTE:
+                raise ParameterError(
+                    f"FlexibleJoints: joint '{robot.joint_names[j]}' is prismatic; the rotor coupling needs revolute "
+                    "joints (use coupling=False)"
+                )
+
+    def _split(self, slots: Slots, x):
+        idx = jnp.array(self.joints, dtype=int)
+        return x[idx], x[slots.coords]
+
+    def _matrix(self, a):
+        return jnp.diag(a) if a.ndim == 1 else a
+
+    # -- interface -------------------------------------------------------------------------------
+    def coord_names(self, robot) -> tuple[str, ...]:
+        self._check_robot(robot)
+        return tuple(f"theta_{robot.joint_names[j]}" for j in self.joints)
+
+    def coords_at_posture(self, robot, slots: Slots, q):
+        """Motor angles of an unloaded spring at link posture ``q``: theta = q."""
+        return jnp.asarray(q)[jnp.array(self.joints, dtype=int)]
+
+    def kinetic_energy(self, robot, slots: Slots, x, xd):
+        _, thd = self._split(slots, xd)
+        spin = self.gear_ratio * thd
+        if self.coupling:
+            n = robot.nq
+            ls = forward_pass(robot, x[:n], xd[:n])
+            carried = []
+            for j in self.joints:
+                p = robot.parents[j]
+                if p < 0:  # a fixed base does not turn
+                    carried.append(jnp.zeros((), dtype=xd.dtype))
+                else:
+                    # joint axis in the parent's axes does not depend on q_j (rotation about itself)
+                    z = robot.placement_R[j] @ robot.axis[j]
+                    carried.append(jnp.dot(z, ls.w[p]))
+            spin = spin + jnp.stack(carried)
+        return 0.5 * jnp.sum(self.rotor_inertia * spin**2)
+
+    def potential_energy(self, robot, slots: Slots, x):
+        q, th = self._split(slots, x)
+        d = q - th
+        return 0.5 * d @ (self._matrix(self.stiffness) @ d)
+
+    def generalized_force(self, robot, slots: Slots, t, x, xd, z):
+        idx = jnp.array(self.joints, dtype=int)
+        qd, thd = self._split(slots, xd)
+        joint = self._matrix(self.damping) @ (qd - thd)
+        vs = self.coulomb_velocity
+        f_link = -joint - self.link_viscous * qd - self.link_coulomb * _smooth_sign(qd, vs)
+        f_motor = joint - self.motor_viscous * thd - self.motor_coulomb * _smooth_sign(thd, vs)
+        f = jnp.zeros(slots.nx, dtype=xd.dtype).at[idx].add(f_link)
+        return f.at[slots.coords].add(f_motor)
+
+    def actuation(self, robot, slots: Slots, B):
+        idx = jnp.array(self.joints, dtype=int)
+        rows = B[idx]
+        return B.at[idx].set(0.0).at[slots.coords].set(rows)

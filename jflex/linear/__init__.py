@@ -1,0 +1,18 @@
+"""Linear analyses at a posture: modal analysis, MAC and mode tracking, FRFs, stability lobes."""
+
+from ._common import expand_posture as expand_posture, resolve_hold as resolve_hold, linearization as linearization
+from ._modal import Eigen as Eigen, Modes as Modes, eigen as eigen, modes as modes, modal_analysis as modal_analysis
+from ._frf import (
+    frf as frf,
+    frf_matrices as frf_matrices,
+    half_power_damping as half_power_damping,
+    modal_frf as modal_frf,
+)
+from ._mac import best_permutation as best_permutation, mac as mac, serpentine as serpentine, track_modes as track_modes
+from ._lobes import (
+    Lobes as Lobes,
+    directional_matrix as directional_matrix,
+    immersion_angles as immersion_angles,
+    stability_limit as stability_limit,
+    stability_lobes as stability_lobes,
+)

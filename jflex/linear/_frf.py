@@ -1,0 +1,180 @@
+"""Frequency response functions at a posture (seed 003 Eqs. 4.7-4.9, seed 000 "forced response").
+
+Joint space: ``G_theta(w) = (K0 - w^2 M0 + i w C0)^-1`` (direct form) or its modal expansion
+``sum_r psi_r psi_r^T / (a_r (i w - lambda_r))`` over the 2n eigenpairs. At a frame:
+``G_X = J G_theta J^T``. Receptance [m/N], mobility (x i w) or accelerance (x -w^2).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from .._errors import ParameterError, ShapeError
+from .._model import Model
+from ._common import check_frequencies, expand_posture, linearization, resolve_hold, tool_jacobian
+from ._modal import Eigen, eigen
+
+_KINDS = ("receptance", "mobility", "accelerance")
+_METHODS = ("direct", "modal")
+
+
+def _inv_small(D):
+    """Inverse of a small (n, n) matrix. n <= 3: the adjugate, which XLA vectorises across a batch
+    (LAPACK's per-matrix calls dominate otherwise); larger n: LU."""
+    n = D.shape[-1]
+    if n == 1:
+        return 1.0 / D
+    if n == 2:
+        a, b, c, d = D[0, 0], D[0, 1], D[1, 0], D[1, 1]
+        det = a * d - b * c
+        return jnp.stack([jnp.stack([d, -b]), jnp.stack([-c, a])]) / det
+    if n == 3:
+        c0, c1, c2 = D[:, 0], D[:, 1], D[:, 2]
+        # rows of the inverse are cross products of the columns, over the determinant
+        r0, r1, r2 = jnp.cross(c1, c2), jnp.cross(c2, c0), jnp.cross(c0, c1)
+        det = jnp.dot(c0, r0)
+        return jnp.stack([r0, r1, r2]) / det
+    return jnp.linalg.inv(D)
+
+
+def _kind_factor(omega, kind):
+    if kind == "receptance":
+        return jnp.ones_like(omega, dtype=complex)
+    if kind == "mobility":
+        return 1j * omega
+    return -(omega**2) + 0j
+
+
+def _check_kind_method(kind, method):
+    if kind not in _KINDS:
+        raise ShapeError(f"frf: kind must be one of {_KINDS}, got '{kind}'")
+    if method not in _METHODS:
+        raise ShapeError(f"frf: method must be one of {_METHODS}, got '{method}'")
+
+
+def frf_matrices(M, C, K, omega, *, kind: str = "receptance", method: str = "direct", T=None):
+    """FRF of ``M x'' + C x' + K x = f`` on a frequency grid.
+
+    **Arguments:** ``M``, ``C``, ``K`` (n, n); ``omega`` (nf,) [rad/s], increasing, >= 0;
+    ``kind`` receptance | mobility | accelerance; ``method`` direct | modal; ``T`` optional
+    (p, n) output/input map (e.g. a Jacobian): returns ``T H T^T``.
+
+    **Returns:** complex (nf, n, n) (or (nf, p, p)).
+    """
+    _check_kind_method(kind, method)
+    omega = check_frequencies(omega)
+    M, C, K = (jnp.asarray(A, dtype=float) for A in (M, C, K))
+    if method == "modal":
+        H = modal_frf(eigen(M, C, K), omega, T=T)
+    else:
+        def one(w):
+            G = _inv_small(K - w**2 * M + 1j * w * C)
+            return G if T is None else T @ G @ T.T
+        H = jax.vmap(one)(omega)
+    return H * _kind_factor(omega, kind)[:, None, None]
+
+
+def modal_frf(e: Eigen, omega, *, T=None):
+    """Receptance from the modal expansion over all 2n eigenpairs, optionally mapped by ``T``."""
+    u = e.shape if T is None else T @ e.shape
+    R = u[:, None, :] * u[None, :, :] / e.a  # (p, p, 2n) residues
+    pole = 1.0 / (1j * omega[:, None] - e.eigenvalue[None, :])  # (nf, 2n)
+    return jnp.einsum("ijr,fr->fij", R, pole)
+
+
+def frf(
+    model: Model,
+    posture,
+    omega,
+    *,
+    hold=(),
+    frame=None,
+    reference: str = "local_world_aligned",
+    components: str = "linear",
+    kind: str = "receptance",
+    method: str = "direct",
+):
+    """Frequency response of ``model`` linearised at a posture (seed 003 Eqs. 4.7-4.9).
+
+    **Arguments:**
+
+    - ``model``, ``posture`` ((n,) q0 or (nx,) x0), ``hold``: as in :func:`jflex.modal_analysis`.
+    - ``omega``: (nf,) angular frequencies [rad/s]; finite, >= 0, strictly increasing.
+    - ``frame``: None for the joint-space FRF over the kept coordinates; a frame name (e.g.
+      ``"tool"``) for ``G_X = J G J^T`` with ``reference`` / ``components`` as in
+      :func:`jflex.jacobian` (``"linear"``: the 3x3 translational FRF of Eq. 4.8).
+    - ``kind``: ``"receptance"`` [m/N, rad/(N m)], ``"mobility"`` (x i w) or
+      ``"accelerance"`` (x -w^2).
+    - ``method``: ``"direct"`` (inverse of the dynamic stiffness, including frequency-dependent
+      effect terms) or ``"modal"`` (modal expansion; viscous models only).
+
+    **Returns:** complex (nf, p, p).
+    """
+    _check_kind_method(kind, method)
+    omega = check_frequencies(omega)
+    x0, lin = linearization(model, posture, hold)
+    T = None if frame is None else tool_jacobian(model, x0, lin.keep, frame, reference, components)
+    r, lay = model.rigid, model.layout
+    idx = jnp.array(lin.keep, dtype=int)
+    extras = [e for e, s in zip(model.effects, lay.slots) if e.dynamic_stiffness(r, s, x0, 1.0) is not None]
+    if not extras:
+        return frf_matrices(lin.M, lin.C, lin.K, omega, kind=kind, method=method, T=T)
+    if method == "modal":
+        names = sorted({type(e).__name__ for e in extras})
+        raise ParameterError(
+            f"frf: method='modal' needs a viscous model, but {names} add frequency-dependent stiffness; use method='direct'"
+        )
+
+    def one(w):
+        D = lin.K - w**2 * lin.M + 1j * w * lin.C
+        for e, s in zip(model.effects, lay.slots):
+            extra = e.dynamic_stiffness(r, s, x0, w)
+            if extra is not None:
+                D = D + extra[jnp.ix_(idx, idx)]
+        G = _inv_small(D)
+        return G if T is None else T @ G @ T.T
+
+    return jax.vmap(one)(omega) * _kind_factor(omega, kind)[:, None, None]
+
+
+def half_power_damping(omega, H):
+    """Damping ratio of the highest peak of ``|H|`` by the half-power bandwidth (seed 000):
+    ``zeta ~ (w+ - w-) / (2 w_peak)`` with ``|H(w+-)| = |H|max / sqrt 2`` (linear interpolation
+    between grid points). Accurate for isolated, lightly damped modes.
+
+    **Arguments:** ``omega`` (nf,) increasing [rad/s]; ``H`` (nf,) complex or real FRF.
+
+    **Returns:** ``(zeta, w_peak)``; zeta is NaN when a half-power point lies off the grid.
+    """
+    w = check_frequencies(omega)
+    h = jnp.abs(jnp.asarray(H))
+    if h.shape != w.shape:
+        raise ShapeError(f"half_power_damping: H must have the shape of omega {w.shape}, got {h.shape}")
+    nf = w.shape[0]
+    k = jnp.argmax(h)
+    level = h[k] / jnp.sqrt(2.0)
+    i = jnp.arange(nf)
+    below = h < level
+    # last grid point below the level left of the peak, first one right of it
+    left = jnp.max(jnp.where(below & (i < k), i, -1))
+    right = jnp.min(jnp.where(below & (i > k), i, nf))
+
+    def cross(i0, i1):
+        h0, h1 = h[i0], h[i1]
+        t = (level - h0) / (h1 - h0)
+        return w[i0] + t * (w[i1] - w[i0])
+
+    wl = cross(jnp.clip(left, 0, nf - 1), jnp.clip(left + 1, 0, nf - 1))
+    wr = cross(jnp.clip(right - 1, 0, nf - 1), jnp.clip(right, 0, nf - 1))
+    ok = (left >= 0) & (right < nf)
+    # peak frequency from a parabola through the three samples around the maximum
+    k0 = jnp.clip(k, 1, nf - 2)
+    y0, y1, y2 = h[k0 - 1], h[k0], h[k0 + 1]
+    den = y0 - 2 * y1 + y2
+    d = jnp.where(den != 0, 0.5 * (y0 - y2) / jnp.where(den != 0, den, 1.0), 0.0)
+    wpk = w[k0] + d * 0.5 * (w[k0 + 1] - w[k0 - 1])
+    return jnp.where(ok, (wr - wl) / (2 * wpk), jnp.nan), wpk
+
+
+__all__ = ["frf", "frf_matrices", "modal_frf", "half_power_damping", "expand_posture", "resolve_hold"]
