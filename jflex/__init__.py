@@ -79,3 +79,4 @@ from .linear import (
     stability_lobes as stability_lobes,
     track_modes as track_modes,
 )
+from . import fem as fem
