@@ -84,6 +84,12 @@ class AbstractEffect(eqx.Module):
         from the link coordinate to the motor coordinate). Default: unchanged."""
         return B
 
+    def output(self, robot, slots: Slots, name: str, x, xd, z):
+        """Value of the named output ``name`` (e.g. ``"beam.tip_deflection"``,
+        ``"beam.strain@0.3"``) at one state, or ``None`` when this effect does not provide it.
+        Used by :func:`jflex.simulate` to resolve output names. Default: provides nothing."""
+        return None
+
     def dynamic_stiffness(self, robot, slots: Slots, x0, omega):
         """Frequency-domain contribution to the dynamic stiffness at ``omega`` [rad/s], complex
         (nx, nx), for effects whose time-domain force is not a plain function of (x, xd)

@@ -1,0 +1,178 @@
+"""Damping laws and linear damping effects.
+
+A *damping law* maps a deformation vector ``e`` (m,) with its stiffness matrix ``K`` (m, m) to a
+resisting force ``F`` (m,) (the generalised force on ``e`` is ``-F``), possibly with internal
+states. Laws are used by :class:`StructuralDamping` (any coordinates, constant ``K``) and by
+:class:`jflex.effects.FlexibleLink` (its beam stiffness, which varies with a sliding link's
+length). Each law also gives its exact frequency-domain term, which
+:func:`jflex.dynamic_stiffness` adds to what linearising the time-domain force already gives.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import ParameterError, ShapeError
+from ._base import AbstractEffect, Slots
+
+
+def _pos(v, name, strict=False):
+    a = np.asarray(v, dtype=float)
+    if not np.all(np.isfinite(a)) or (np.any(a <= 0) if strict else np.any(a < 0)):
+        raise ParameterError(f"{name} must be finite and {'> 0' if strict else '>= 0'}, got {v}")
+    return jnp.asarray(a)
+
+
+class AbstractDampingLaw(eqx.Module):
+    """Resisting force ``F(K, e, ed, z)`` of a structural damping law on deformations ``e`` (m,).
+
+    ``P`` (r, m) projects ``e`` onto the displacements a displacement-driven law (hysteresis)
+    acts on (default identity); the force returned is already mapped back, ``P^T F_r``.
+    """
+
+    def state_suffixes(self, m: int, r: int) -> tuple[str, ...]:
+        return ()
+
+    def initial_state(self, m: int, r: int):
+        return jnp.zeros(len(self.state_suffixes(m, r)))
+
+    def force(self, K, e, ed, z, P):
+        raise NotImplementedError
+
+    def state_rate(self, K, e, ed, z, P):
+        return jnp.zeros(len(self.state_suffixes(e.shape[0], P.shape[0])))
+
+    def frequency_term(self, K, omega, P):
+        """Exact complex dynamic stiffness (m, m) at ``omega`` [rad/s] minus what the
+        linearisation of :meth:`force` (with states frozen) already contributes; ``None``: nothing."""
+        return None
+
+
+class KelvinVoigt(AbstractDampingLaw):
+    """Stiffness-proportional (Kelvin-Voigt) damping ``F = k_e K ed`` (seed 004 Eq. 14).
+
+    **Arguments:** ``k_e`` [s]: the retardation time ``sigma = E (eps + k_e d eps/dt)``; for a
+    Kelvin-Voigt coefficient ``K_v`` [Pa s] of seed 001, ``k_e = K_v / E``.
+    """
+
+    k_e: jnp.ndarray
+
+    def __init__(self, k_e):
+        self.k_e = _pos(k_e, "KelvinVoigt.k_e")
+
+    def force(self, K, e, ed, z, P):
+        return self.k_e * (K @ ed)
+
+
+class StructuralDamping(AbstractEffect):
+    """A damping law on chosen coordinates with a constant stiffness matrix.
+
+    **Arguments:** ``coords`` indices into the model's ``x`` (static); ``stiffness`` (m, m)
+    [N/m or N m/rad]; ``law``: an :class:`AbstractDampingLaw`; ``name`` prefixes its state names.
+    """
+
+    stiffness: jnp.ndarray
+    law: AbstractDampingLaw
+    coords: tuple[int, ...] = eqx.field(static=True)
+    name: str = eqx.field(static=True, default="damping")
+
+    def __check_init__(self):
+        m = len(self.coords)
+        if jnp.shape(self.stiffness) != (m, m):
+            raise ShapeError(f"StructuralDamping.stiffness: expected shape ({m}, {m}) for coords {self.coords}, got {jnp.shape(self.stiffness)}")
+
+    def _P(self):
+        return jnp.eye(len(self.coords))
+
+    def state_names(self, robot):
+        m = len(self.coords)
+        return tuple(f"{self.name}.{s}" for s in self.law.state_suffixes(m, m))
+
+    def initial_state(self, robot, slots: Slots):
+        m = len(self.coords)
+        return self.law.initial_state(m, m)
+
+    def generalized_force(self, robot, slots: Slots, t, x, xd, z):
+        idx = jnp.array(self.coords)
+        F = self.law.force(self.stiffness, x[idx], xd[idx], z[slots.states], self._P())
+        return jnp.zeros(slots.nx).at[idx].add(-F)
+
+    def state_rate(self, robot, slots: Slots, t, x, xd, z):
+        idx = jnp.array(self.coords)
+        return self.law.state_rate(self.stiffness, x[idx], xd[idx], z[slots.states], self._P())
+
+    def dynamic_stiffness(self, robot, slots: Slots, x0, omega):
+        D = self.law.frequency_term(self.stiffness, omega, self._P())
+        if D is None:
+            return None
+        idx = jnp.array(self.coords)
+        return jnp.zeros((slots.nx, slots.nx), complex).at[jnp.ix_(idx, idx)].add(D)
+
+
+class ViscousDamping(AbstractEffect):
+    """Linear viscous damping ``f = -C xd`` on chosen coordinates.
+
+    **Arguments:** ``coords`` indices into ``x`` (static); ``C`` (m, m) [N s/m or N m s/rad],
+    symmetric positive semi-definite (or (m,) for a diagonal).
+    """
+
+    C: jnp.ndarray
+    coords: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(self, coords, C):
+        self.coords = tuple(int(i) for i in coords)
+        C = np.asarray(C, dtype=float)
+        m = len(self.coords)
+        if C.shape == (m,):
+            C = np.diag(C)
+        if C.shape != (m, m):
+            raise ShapeError(f"ViscousDamping.C: expected ({m},) or ({m}, {m}), got {C.shape}")
+        if not np.all(np.isfinite(C)) or np.linalg.eigvalsh(0.5 * (C + C.T)).min() < -1e-12 * max(1.0, np.abs(C).max()):
+            raise ParameterError("ViscousDamping.C must be finite and positive semi-definite (a damper that adds energy is non-physical)")
+        self.C = jnp.asarray(C)
+
+    def generalized_force(self, robot, slots: Slots, t, x, xd, z):
+        idx = jnp.array(self.coords)
+        return jnp.zeros(slots.nx).at[idx].add(-self.C @ xd[idx])
+
+
+def rayleigh_damping(model, x0, alpha, beta, coords=None) -> ViscousDamping:
+    """Rayleigh damping ``C = alpha M + beta K`` of ``model`` linearised at posture ``x0``.
+
+    **Arguments:** ``alpha`` [1/s], ``beta`` [s]; ``coords``: names (or indices) of the
+    coordinates it acts on (default all). ``K`` is the linearised stiffness (gravity stiffness
+    included). **Returns:** a :class:`ViscousDamping` to add to the model.
+    """
+    from .._model import linearize
+
+    if float(alpha) < 0 or float(beta) < 0:
+        raise ParameterError(f"rayleigh_damping: alpha and beta must be >= 0, got {alpha}, {beta}")
+    lay = model.layout
+    if coords is None:
+        idx = list(range(lay.nx))
+    else:
+        idx = []
+        for c in coords:
+            if isinstance(c, str):
+                if c not in lay.coord_names:
+                    raise ShapeError(f"rayleigh_damping: unknown coordinate '{c}'; coordinates: {list(lay.coord_names)}")
+                idx.append(lay.coord_names.index(c))
+            else:
+                idx.append(int(c))
+    lin = linearize(model, x0)
+    ii = np.ix_(idx, idx)
+    C = float(alpha) * np.asarray(lin.M)[ii] + float(beta) * np.asarray(lin.K)[ii]
+    return ViscousDamping(idx, 0.5 * (C + C.T))
+
+
+def coordinate_indices(model, names) -> tuple[int, ...]:
+    """Indices of named coordinates in a model's ``x`` (named error for an unknown one)."""
+    lay = model.layout
+    out = []
+    for c in names:
+        if c not in lay.coord_names:
+            raise ShapeError(f"unknown coordinate '{c}'; coordinates: {list(lay.coord_names)}")
+        out.append(lay.coord_names.index(c))
+    return tuple(out)
