@@ -69,9 +69,12 @@ class FEModel(eqx.Module):
 
         **Returns:** ``(M, K)``, each (n_dof, n_dof).
         """
-        X = jnp.asarray(X)
+        X = jnp.asarray(X, float)
         if X.shape != (self.n_nodes, 2):
             raise ShapeError(f"X: expected node positions of shape ({self.n_nodes}, 2), got {X.shape}")
+        return _assemble(self, X, bar_angles, bar_E)
+
+    def _assemble(self, X, bar_angles, bar_E):
         n = self.n_dof
         dofs = np.asarray(self.node_dofs, dtype=int).reshape(-1, 3)
         dofs = np.where(dofs < 0, n, dofs)  # fixed slots go to a dump row/column that is sliced off
@@ -116,6 +119,9 @@ class FEModel(eqx.Module):
         dofs = np.asarray(self.node_dofs, dtype=int)
         Up = jnp.concatenate([U, jnp.zeros(U.shape[:-1] + (1,))], axis=-1)
         return Up[..., np.where(dofs < 0, self.n_dof, dofs)]
+
+
+_assemble = eqx.filter_jit(FEModel._assemble)
 
 
 def fe_model(
@@ -187,6 +193,7 @@ class Modes(eqx.Module):
     """Mode shapes as columns, mass-normalised."""
 
 
+@eqx.filter_jit
 def modes(M: Float[ArrayLike, "n n"], K: Float[ArrayLike, "n n"], n_modes: int | None = None) -> Modes:
     """Generalized symmetric eigenproblem by Cholesky reduction (differentiable, jit-able).
 
