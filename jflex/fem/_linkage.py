@@ -100,23 +100,7 @@ def linkage_motion(
     **Returns:** :class:`LinkageMotion` with leading axis n.
     """
     phis = jnp.asarray(phis, float)
-
-    @jax.jit
-    def run(q0, phis, args):
-        def step(q, phi):
-            sol = optx.root_find(
-                lambda qq, a: residual(qq, phi, a), optx.Newton(rtol=1e-13, atol=1e-13), q, args,
-                max_steps=50, throw=False,
-            )
-            qn = sol.value
-            ok = sol.result == optx.RESULTS.successful
-            dq, ddq = motion_derivatives(residual, qn, phi, args)
-            return qn, (qn, dq, ddq, ok)
-
-        _, out = jax.lax.scan(step, jnp.asarray(q0, float), phis)
-        return out
-
-    q, dq, ddq, ok = run(q0, phis, args)
+    q, dq, ddq, ok = _continuation(residual, jnp.asarray(q0, float), phis, args)
     if throw and not bool(jnp.all(ok)):
         bad = int(jnp.argmin(ok))
         raise SolverError(
@@ -124,6 +108,22 @@ def linkage_motion(
             "the linkage may not assemble there (check the dimensions) or the step in phi is too large"
         )
     return LinkageMotion(phi=phis, q=q, dq=dq, ddq=ddq)
+
+
+@eqx.filter_jit
+def _continuation(residual, q0, phis, args):
+    def step(q, phi):
+        sol = optx.root_find(
+            lambda qq, a: residual(qq, phi, a), optx.Newton(rtol=1e-13, atol=1e-13), q, args,
+            max_steps=50, throw=False,
+        )
+        qn = sol.value
+        ok = sol.result == optx.RESULTS.successful
+        dq, ddq = motion_derivatives(residual, qn, phi, args)
+        return qn, (qn, dq, ddq, ok)
+
+    _, out = jax.lax.scan(step, q0, phis)
+    return out
 
 
 def point_motion(points: Callable, motion: LinkageMotion, args=None) -> tuple[Array, Array, Array]:
@@ -136,7 +136,11 @@ def point_motion(points: Callable, motion: LinkageMotion, args=None) -> tuple[Ar
 
     **Returns:** ``(P, P', P'')``, each (n, p, 2); times ``omega`` and ``omega^2`` give velocity and acceleration.
     """
+    return _point_motion(points, motion, args)
 
+
+@eqx.filter_jit
+def _point_motion(points, motion, args):
     def one(q, dq, ddq, phi):
         # Along the exact path q(phi + s) = q + s q' + s^2/2 q'' + O(s^3), the second s-derivative is exact.
         h = lambda s: points(q + s * dq + 0.5 * s * s * ddq, phi + s, args)
