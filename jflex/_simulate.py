@@ -70,6 +70,12 @@ def _vf_work(t, y, args):
 
 
 @eqx.filter_jit
+def _check_rate(model, inputs, t, y):
+    rate = _vf_plain(t, y, (model, inputs))
+    return jnp.all(jnp.array([jnp.all(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves((y, rate))]))
+
+
+@eqx.filter_jit
 def _compute_outputs(model, names, inputs, ts, xs, xds, zs):
     us = jax.vmap(inputs)(ts)
     return {name: jax.vmap(_resolve_output(model, name))(ts, xs, xds, zs, us) for name in names}
@@ -208,7 +214,18 @@ def simulate(
     except (jax.errors.ConcretizationTypeError, TypeError):
         jumps = sorted(set(float(j) for j in tuple(inputs.jump_times()) + tuple(jump_ts)))
 
-    controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    # A NaN at the start would only show up as max_steps after the controller shrinks dt
+    # forever: catch it here, by name.
+    y0 = (x0, xd0, z0, jnp.zeros(()))
+    if throw and not any(isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves((model, inputs, t_start, y0))):
+        rate = _check_rate(model, inputs, t_start, y0)
+        if not bool(rate):
+            raise SolverError(
+                f"simulate: the right-hand side is NaN or inf at t0 = {float(t_start)} s; " + _ADVICE["nonfinite"]
+            )
+
+    # tolerances as arrays: a new tolerance then reuses the compiled solve
+    controller = diffrax.PIDController(rtol=jnp.asarray(rtol, dtype=float), atol=jnp.asarray(atol, dtype=float))
     if jumps:
         controller = diffrax.ClipStepSizeController(controller, jump_ts=jnp.asarray(jumps))
     sol = diffrax.diffeqsolve(
@@ -217,7 +234,7 @@ def simulate(
         t0=t_start,
         t1=ts[-1],
         dt0=dt0,
-        y0=(x0, xd0, z0, jnp.zeros(())),
+        y0=y0,
         args=(model, inputs),
         saveat=diffrax.SaveAt(ts=ts),
         stepsize_controller=controller,

@@ -123,13 +123,17 @@ class ViscousDamping(AbstractEffect):
 
     def __init__(self, coords, C):
         self.coords = tuple(int(i) for i in coords)
-        C = np.asarray(C, dtype=float)
         m = len(self.coords)
+        C = jnp.asarray(C, dtype=float)
         if C.shape == (m,):
-            C = np.diag(C)
+            C = jnp.diag(C)
         if C.shape != (m, m):
             raise ShapeError(f"ViscousDamping.C: expected ({m},) or ({m}, {m}), got {C.shape}")
-        if not np.all(np.isfinite(C)) or np.linalg.eigvalsh(0.5 * (C + C.T)).min() < -1e-12 * max(1.0, np.abs(C).max()):
+        try:
+            Cn = np.asarray(C)
+        except Exception:  # traced (fitting, gradients): values were checked where they were concrete
+            Cn = None
+        if Cn is not None and (not np.all(np.isfinite(Cn)) or np.linalg.eigvalsh(0.5 * (Cn + Cn.T)).min() < -1e-12 * max(1.0, np.abs(Cn).max())):
             raise ParameterError("ViscousDamping.C must be finite and positive semi-definite (a damper that adds energy is non-physical)")
         self.C = jnp.asarray(C)
 
