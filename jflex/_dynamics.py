@@ -121,7 +121,7 @@ def rnea(robot: Robot, q, qd, qdd, f_ext=None):
     tau = []
     for i in range(robot.nq):
         sw, sv = joint_motion(robot, i)
-        tau.append(jnp.dot(sw, ns[i]) + jnp.dot(sv, fs[i]))
+        tau.append(sp.dot(sw, ns[i]) + sp.dot(sv, fs[i]))
     return jnp.stack(tau)
 
 
@@ -141,23 +141,24 @@ def crba(robot: Robot, q):
     (q,) = _checked(robot, q=q)
     n = robot.nq
     ls = forward_pass(robot, q)
-    X = [sp.motion_transform_6x6(ls.R[i], ls.p[i]) for i in range(n)]
-    Ic = [sp.inertia_6x6(robot.inertia[i]) for i in range(n)]
+    # composite inertias kept as 10 parameters: the child-to-parent step is linear in them
+    Ic = [robot.inertia[i] for i in range(n)]
     for i in reversed(range(n)):
         par = robot.parents[i]
         if par >= 0:
-            Ic[par] = Ic[par] + X[i].T @ Ic[i] @ X[i]
-    S = [jnp.concatenate(joint_motion(robot, i)) for i in range(n)]
+            Ic[par] = Ic[par] + sp.transform_params_fast(Ic[i], ls.R[i], ls.p[i])
     M = [[None] * n for _ in range(n)]
     zero = jnp.zeros((), dtype=robot.inertia.dtype)
     for i in range(n):
-        F = Ic[i] @ S[i]
-        M[i][i] = S[i] @ F
+        sw, sv = joint_motion(robot, i)
+        Fn, Ff = sp.inertia_apply(Ic[i], sw, sv)
+        M[i][i] = sp.dot(sw, Fn) + sp.dot(sv, Ff)
         j = i
         while robot.parents[j] >= 0:
-            F = X[j].T @ F
+            Fn, Ff = sp.force_to_parent(ls.R[j], ls.p[j], Fn, Ff)
             j = robot.parents[j]
-            M[i][j] = M[j][i] = S[j] @ F
+            sw, sv = joint_motion(robot, j)
+            M[i][j] = M[j][i] = sp.dot(sw, Fn) + sp.dot(sv, Ff)
     return jnp.stack([jnp.stack([zero if e is None else e for e in row]) for row in M])
 
 

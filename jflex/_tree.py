@@ -42,8 +42,8 @@ def joint_transform(robot: Robot, i: int, qi):
     """(R, p) of body i in its parent's frame at joint value ``qi``."""
     Rpl, ppl = robot.placement_R[i], robot.placement_p[i]
     if robot.joint_types[i] == PRISMATIC:
-        return Rpl, ppl + Rpl @ (robot.axis[i] * qi)
-    return Rpl @ sp.rot_axis_angle(robot.axis[i], qi), ppl
+        return Rpl, ppl + sp.mv(Rpl, robot.axis[i] * qi)
+    return sp.mm(Rpl, sp.rot_axis_angle(robot.axis[i], qi)), ppl
 
 
 def forward_pass(robot: Robot, q, qd=None, qdd=None, base_acc=None) -> LinkStates:

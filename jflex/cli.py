@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import importlib.util
 import pathlib
 import sys
@@ -15,6 +16,7 @@ from ._errors import JFlexError
 from ._runs import load_yaml, make_run_dir, write_results
 
 _REPO = pathlib.Path(__file__).resolve().parent.parent
+_PLUGINS = ("jflex.gap._cli",)
 
 
 def _default_config(name: str) -> pathlib.Path:
@@ -164,6 +166,14 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("experiment")
     pr.add_argument("rest", nargs=argparse.REMAINDER)
     pr.set_defaults(fn=cmd_run)
+    # Subsystems register their own subcommands: each module exposes add_subcommands(sub),
+    # whose parsers set ``fn`` like the ones above.
+    for mod in _PLUGINS:
+        try:
+            module = importlib.import_module(mod)
+        except ImportError:
+            continue
+        module.add_subcommands(sub)
     return p
 
 

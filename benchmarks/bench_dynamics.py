@@ -1,0 +1,168 @@
+"""jflex against Pinocchio (and the JAX peers when installed) on the same random Panda states.
+
+Run: ``python benchmarks/bench_dynamics.py [--batches 1 1000 100000] [--out DIR]``.
+Prints a table: time per evaluation for each library and the ratio Pinocchio / jflex (> 1: jflex
+faster). Pinocchio is called in a Python loop, one state at a time, as a user would.
+jflex is timed after warm-up with ``block_until_ready``; compile times are reported separately.
+The arm is the 7-joint Panda of example-robot-data (fingers locked at zero).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import platform
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jflex
+from jflex._config import _example_robot_urdf
+
+
+def panda7():
+    path = str(_example_robot_urdf("panda"))
+    text = pathlib.Path(path).read_text()
+    for j in ("panda_finger_joint1", "panda_finger_joint2"):
+        i = text.index(f'name="{j}"')
+        k = text.index('type="prismatic"', i)
+        text = text[:k] + 'type="fixed"' + text[k + len('type="prismatic"') :]
+    robot = jflex.from_urdf_string(text, name="panda7")
+    import pinocchio as pin
+
+    full = pin.buildModelFromUrdf(path)
+    lock = [full.getJointId("panda_finger_joint1"), full.getJointId("panda_finger_joint2")]
+    model = pin.buildReducedModel(full, lock, pin.neutral(full))
+    return robot, model, path
+
+
+def best_time(fn, reps=3):
+    best = np.inf
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def bench_jflex(robot, q, qd, qdd, tau):
+    fns = {
+        "rnea": lambda a, b, c, d: jflex.rnea(robot, a, b, c),
+        "crba": lambda a, b, c, d: jflex.crba(robot, a),
+        "fd (aba)": lambda a, b, c, d: jflex.forward_dynamics(robot, a, b, d, method="aba"),
+        "fd (crba+chol)": lambda a, b, c, d: jflex.forward_dynamics(robot, a, b, d, method="crba"),
+        "dtau/dq": lambda a, b, c, d: jax.jacfwd(lambda x: jflex.rnea(robot, x, b, c))(a),
+    }
+    out, compile_s = {}, {}
+    for name, f in fns.items():
+        jf = jax.jit(jax.vmap(f))
+        t0 = time.perf_counter()
+        jf.lower(q, qd, qdd, tau).compile()
+        compile_s[name] = time.perf_counter() - t0
+        jax.block_until_ready(jf(q, qd, qdd, tau))
+        out[name] = best_time(lambda: jax.block_until_ready(jf(q, qd, qdd, tau)))
+    return out, compile_s
+
+
+def bench_pinocchio(model, q, qd, qdd, tau):
+    import pinocchio as pin
+
+    data = model.createData()
+    N = q.shape[0]
+    fns = {
+        "rnea": lambda i: pin.rnea(model, data, q[i], qd[i], qdd[i]),
+        "crba": lambda i: pin.crba(model, data, q[i]),
+        "fd (aba)": lambda i: pin.aba(model, data, q[i], qd[i], tau[i]),
+        "fd (crba+chol)": None,
+        "dtau/dq": lambda i: pin.computeRNEADerivatives(model, data, q[i], qd[i], qdd[i]),
+    }
+    out = {}
+    for name, f in fns.items():
+        if f is None:
+            continue
+        out[name] = best_time(lambda: [f(i) for i in range(N)], reps=2 if N > 1000 else 3)
+    return out
+
+
+def bench_mjx(path, q, qd, qdd):
+    """MuJoCo MJX inverse dynamics on the same Panda, if mujoco-mjx is installed."""
+    try:
+        import mujoco
+        from mujoco import mjx
+    except ImportError:
+        return None
+    try:
+        text = pathlib.Path(path).read_text()
+        import re
+
+        text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
+        text = re.sub(r"<collision>.*?</collision>", "", text, flags=re.S)
+        m = mujoco.MjModel.from_xml_string(text)
+        mx = mjx.put_model(m)
+        N = q.shape[0]
+        nv = m.nv
+        pad = lambda a: jnp.concatenate([a, jnp.zeros((N, nv - a.shape[1]))], axis=1)
+        Q, QD, QDD = pad(q), pad(qd), pad(qdd)
+
+        def inv(a, b, c):
+            d = mjx.make_data(mx).replace(qpos=a, qvel=b, qacc=c)
+            return mjx.inverse(mx, d).qfrc_inverse
+
+        f = jax.jit(jax.vmap(inv))
+        t0 = time.perf_counter()
+        jax.block_until_ready(f(Q, QD, QDD))
+        comp = time.perf_counter() - t0
+        return {"rnea": best_time(lambda: jax.block_until_ready(f(Q, QD, QDD)))}, {"rnea": comp}
+    except Exception as exc:  # a peer that fails on this robot is reported, not fatal
+        print(f"  mjx: skipped ({type(exc).__name__}: {exc})")
+        return None
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--batches", type=int, nargs="+", default=[1, 1000, 100000])
+    ap.add_argument("--pin-max", type=int, default=100000, help="largest batch Pinocchio's loop runs")
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args(argv)
+    robot, model, path = panda7()
+    rng = np.random.default_rng(0)
+    rows = []
+    print(f"jax {jax.__version__} on {jax.devices()[0].platform} ({platform.processor() or platform.machine()}), float64, Panda 7 joints")
+    for N in args.batches:
+        q = rng.uniform(-1.5, 1.5, (N, robot.nq))
+        qd, qdd = rng.normal(size=(2, N, robot.nq))
+        tau = np.stack([jflex.rnea(robot, q[i], qd[i], qdd[i]) for i in range(min(N, 1))] * N) if N < 2 else None
+        tau = jax.jit(jax.vmap(lambda a, b, c: jflex.rnea(robot, a, b, c)))(q, qd, qdd)
+        jt, jc = bench_jflex(robot, q, qd, qdd, np.asarray(tau))
+        pt = bench_pinocchio(model, q, qd, qdd, np.asarray(tau)) if N <= args.pin_max else {}
+        mj = bench_mjx(path, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
+        for name in jt:
+            row = {
+                "batch": N,
+                "algorithm": name,
+                "jflex_us": 1e6 * jt[name] / N,
+                "jflex_compile_s": jc[name],
+                "pinocchio_loop_us": 1e6 * pt[name] / N if name in pt else None,
+                "mjx_us": 1e6 * mj[0][name] / N if mj and name in mj[0] else None,
+            }
+            row["ratio_pin_over_jflex"] = row["pinocchio_loop_us"] / row["jflex_us"] if row["pinocchio_loop_us"] else None
+            row["ratio_mjx_over_jflex"] = row["mjx_us"] / row["jflex_us"] if row["mjx_us"] else None
+            rows.append(row)
+    fmt = lambda v, f: "-" if v is None else f.format(v)
+    print(f"{'batch':>7} {'algorithm':<15} {'jflex us':>10} {'pin us':>9} {'pin/jflex':>9} {'mjx us':>9} {'mjx/jflex':>9} {'compile s':>9}")
+    for r in rows:
+        print(
+            f"{r['batch']:>7} {r['algorithm']:<15} {r['jflex_us']:>10.3f} {fmt(r['pinocchio_loop_us'], '{:9.3f}')} "
+            f"{fmt(r['ratio_pin_over_jflex'], '{:9.2f}')} {fmt(r['mjx_us'], '{:9.3f}')} {fmt(r['ratio_mjx_over_jflex'], '{:9.2f}')} {r['jflex_compile_s']:>9.2f}"
+        )
+    if args.out:
+        pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
+        (pathlib.Path(args.out) / "bench_dynamics.json").write_text(json.dumps({"jax": jax.__version__, "rows": rows}, indent=2))
+    return rows
+
+
+if __name__ == "__main__":
+    main()
