@@ -29,7 +29,7 @@ import numpy as np
 
 from .._errors import ParameterError, ShapeError
 from .._robot import REVOLUTE
-from .._tree import forward_pass
+from .._tree import joint_transform
 from ._base import AbstractEffect, Slots
 
 
@@ -39,6 +39,21 @@ def _concrete(x):
         return np.asarray(x, dtype=float)
     except Exception:  # a tracer: value checks are skipped, shapes were checked at build time
         return None
+
+
+def _angular_velocities(robot, q, qd):
+    """Body angular velocities (body axes) only: the rotor coupling needs nothing else, and
+    skipping positions and linear velocities keeps the nested autodiff of the Lagrange terms
+    (and its compile time) small."""
+    w = []
+    for i in range(robot.nq):
+        R, _ = joint_transform(robot, i, q[i])
+        p = robot.parents[i]
+        wi = jnp.zeros(3, dtype=qd.dtype) if p < 0 else R.T @ w[p]
+        if robot.joint_types[i] == REVOLUTE:
+            wi = wi + robot.axis[i] * qd[i]
+        w.append(wi)
+    return w
 
 
 def _smooth_sign(v, v_s):
@@ -182,8 +197,7 @@ class FlexibleJoints(AbstractEffect):
         _, thd = self._split(slots, xd)
         spin = self.gear_ratio * thd
         if self.coupling:
-            n = robot.nq
-            ls = forward_pass(robot, x[:n], xd[:n])
+            w = _angular_velocities(robot, x[: robot.nq], xd[: robot.nq])
             carried = []
             for j in self.joints:
                 p = robot.parents[j]
@@ -192,7 +206,7 @@ class FlexibleJoints(AbstractEffect):
                 else:
                     # joint axis in the parent's axes does not depend on q_j (rotation about itself)
                     z = robot.placement_R[j] @ robot.axis[j]
-                    carried.append(jnp.dot(z, ls.w[p]))
+                    carried.append(jnp.dot(z, w[p]))
             spin = spin + jnp.stack(carried)
         return 0.5 * jnp.sum(self.rotor_inertia * spin**2)
 

@@ -93,11 +93,17 @@ def stability_lobes(G, omega, *, n_teeth: int, Kt, Kr=0.0, Ka=0.0, lead_angle=np
         raise ShapeError(f"stability_lobes: G must be (nf, 3, 3) or (nf, 2, 2) with nf = {nf}, got {G.shape}")
     if int(n_teeth) < 1:
         raise ParameterError(f"stability_lobes: n_teeth must be >= 1, got {n_teeth}")
+    coeffs = {}
+    for name, v in (("Kt", Kt), ("Kr", Kr), ("Ka", Ka)):
+        if isinstance(v, str):
+            raise ParameterError(f"stability_lobes: {name} must be a number [Pa], got the string '{v}'")
+        coeffs[name] = jnp.asarray(v, dtype=float)
     try:
-        if float(Kt) <= 0:
+        if float(coeffs["Kt"]) <= 0:
             raise ParameterError(f"stability_lobes: Kt must be > 0 [Pa], got {Kt}")
-    except TypeError:
+    except (TypeError, jax.errors.ConcretizationTypeError):
         pass
+    Kt, Kr, Ka = coeffs["Kt"], coeffs["Kr"], coeffs["Ka"]
     d = G.shape[1]
     alpha = directional_matrix(Kt, Kr, Ka, lead_angle, phi_start, phi_exit)[:d, :d]
     mu = jnp.linalg.eigvals(jnp.einsum("ij,fjk->fik", alpha, G))  # (nf, d)
