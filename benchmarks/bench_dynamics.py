@@ -121,6 +121,39 @@ def bench_mjx(path, q, qd, qdd):
         return None
 
 
+def _strip_geometry(path):
+    import re
+
+    text = pathlib.Path(path).read_text()
+    text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
+    return re.sub(r"<collision>.*?</collision>", "", text, flags=re.S)
+
+
+def bench_adam(path, joint_names, q, qd, qdd):
+    """adam-robotics (JAX backend): mass matrix and bias forces (floating-base API, base fixed at identity)."""
+    try:
+        from adam.jax import KinDynComputations
+    except ImportError:
+        return None
+    try:
+        kd = KinDynComputations(_strip_geometry(path), list(joint_names))
+        H = jnp.eye(4)
+        z6 = jnp.zeros(6)
+        fM = jax.jit(jax.vmap(lambda a: kd.mass_matrix(H, a)))
+        fh = jax.jit(jax.vmap(lambda a, b: kd.bias_force(H, a, z6, b)))
+        fr = jax.jit(jax.vmap(lambda a, b, c: (kd.mass_matrix(H, a)[6:, 6:] @ c) + kd.bias_force(H, a, z6, b)[6:]))
+        times, comp = {}, {}
+        for name, f, args in [("crba", fM, (q,)), ("rnea", fr, (q, qd, qdd))]:
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(*args))
+            comp[name] = time.perf_counter() - t0
+            times[name] = best_time(lambda: jax.block_until_ready(f(*args)))
+        return times, comp
+    except Exception as exc:
+        print(f"  adam: skipped ({type(exc).__name__}: {exc})")
+        return None
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--batches", type=int, nargs="+", default=[1, 1000, 100000])
@@ -134,11 +167,11 @@ def main(argv=None):
     for N in args.batches:
         q = rng.uniform(-1.5, 1.5, (N, robot.nq))
         qd, qdd = rng.normal(size=(2, N, robot.nq))
-        tau = np.stack([jflex.rnea(robot, q[i], qd[i], qdd[i]) for i in range(min(N, 1))] * N) if N < 2 else None
         tau = jax.jit(jax.vmap(lambda a, b, c: jflex.rnea(robot, a, b, c)))(q, qd, qdd)
         jt, jc = bench_jflex(robot, q, qd, qdd, np.asarray(tau))
         pt = bench_pinocchio(model, q, qd, qdd, np.asarray(tau)) if N <= args.pin_max else {}
         mj = bench_mjx(path, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
+        ad = bench_adam(path, robot.joint_names, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
         for name in jt:
             row = {
                 "batch": N,
@@ -148,15 +181,18 @@ def main(argv=None):
                 "pinocchio_loop_us": 1e6 * pt[name] / N if name in pt else None,
                 "mjx_us": 1e6 * mj[0][name] / N if mj and name in mj[0] else None,
             }
+            row["adam_us"] = 1e6 * ad[0][name] / N if ad and name in ad[0] else None
+            row["ratio_adam_over_jflex"] = row["adam_us"] / row["jflex_us"] if row["adam_us"] else None
             row["ratio_pin_over_jflex"] = row["pinocchio_loop_us"] / row["jflex_us"] if row["pinocchio_loop_us"] else None
             row["ratio_mjx_over_jflex"] = row["mjx_us"] / row["jflex_us"] if row["mjx_us"] else None
             rows.append(row)
     fmt = lambda v, f: "-" if v is None else f.format(v)
-    print(f"{'batch':>7} {'algorithm':<15} {'jflex us':>10} {'pin us':>9} {'pin/jflex':>9} {'mjx us':>9} {'mjx/jflex':>9} {'compile s':>9}")
+    print(f"{'batch':>7} {'algorithm':<15} {'jflex us':>10} {'pin us':>9} {'pin/jflex':>9} {'mjx us':>9} {'mjx/jflex':>9} {'adam us':>9} {'adam/jflex':>10} {'compile s':>9}")
     for r in rows:
         print(
             f"{r['batch']:>7} {r['algorithm']:<15} {r['jflex_us']:>10.3f} {fmt(r['pinocchio_loop_us'], '{:9.3f}')} "
-            f"{fmt(r['ratio_pin_over_jflex'], '{:9.2f}')} {fmt(r['mjx_us'], '{:9.3f}')} {fmt(r['ratio_mjx_over_jflex'], '{:9.2f}')} {r['jflex_compile_s']:>9.2f}"
+            f"{fmt(r['ratio_pin_over_jflex'], '{:9.2f}')} {fmt(r['mjx_us'], '{:9.3f}')} {fmt(r['ratio_mjx_over_jflex'], '{:9.2f}')} "
+            f"{fmt(r['adam_us'], '{:9.3f}')} {fmt(r['ratio_adam_over_jflex'], '{:10.2f}')} {r['jflex_compile_s']:>9.2f}"
         )
     if args.out:
         pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
