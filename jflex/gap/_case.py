@@ -1,0 +1,326 @@
+"""A gap-diagnosis case: a nominal model plus measured data sets, validated before any fit.
+
+A case is a folder with ``case.yaml`` (format in ``docs/case_format.md``). Every mistake a user
+can make in it raises :class:`jflex.ConfigError` (the YAML) or :class:`jflex.DataError` (an NPZ
+file) naming the file and the field, before anything is fitted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+
+import numpy as np
+
+from .._config import load_robot
+from .._errors import ConfigError, DataError, JFlexError
+from .._runs import load_yaml
+
+KINDS = ("torque", "frf", "modal", "response")
+SPLITS = ("train", "validation")
+
+# Every candidate name of the library (issue 6); nominal effects are named from the same list.
+EFFECT_NAMES = (
+    "joint_flexibility", "link_flexibility", "viscous_friction", "coulomb_friction", "stribeck_friction",
+    "gravity_compensator", "payload", "rotor_inertia", "orthogonal_compliance", "fractional_damping",
+    "hysteretic_damping", "backlash", "sensor_delay",
+)
+_NOMINAL_EXTRA = ("stiffness", "damping", "value")
+
+
+@dataclasses.dataclass
+class Dataset:
+    """One measured data set of a case, arrays in SI units.
+
+    ``arrays`` holds the NPZ fields; for torque data ``q`` is reordered to the model's joints and
+    ``q_extra`` / ``extra_joints`` keep the columns of joints the model leaves out. For FRF and
+    modal data ``q0`` likewise becomes the model posture and ``q0_extra`` the rest.
+    """
+
+    kind: str
+    file: pathlib.Path
+    split: str
+    name: str
+    arrays: dict
+    extra_joints: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass
+class Case:
+    """A validated case: nominal robot, tool frame, nominal effects and data sets."""
+
+    path: pathlib.Path
+    robot: object
+    tool_frame: str | None
+    nominal_effects: list
+    datasets: list
+    noise: dict
+    options: dict
+
+    def split(self, split: str, kind: str | None = None) -> list[Dataset]:
+        return [d for d in self.datasets if d.split == split and (kind is None or d.kind == kind)]
+
+
+def _err(file, field, msg):
+    return ConfigError(f"{file}: field '{field}': {msg}")
+
+
+def _resolve_joints(spec, robot, file, field) -> tuple[str, ...]:
+    names = tuple(robot.joint_names)
+    if spec is None or spec == "all":
+        return names
+    items = [spec] if isinstance(spec, (str, int)) else list(spec)
+    out = []
+    for j in items:
+        if isinstance(j, int) and not isinstance(j, bool):
+            if not 0 <= j < len(names):
+                raise _err(file, field, f"joint index {j} out of range; the model has joints {list(names)}")
+            out.append(names[j])
+        elif isinstance(j, str) and j in names:
+            out.append(j)
+        else:
+            raise _err(file, field, f"unknown joint {j!r}; the model has joints {list(names)} (or 'all')")
+    return tuple(out)
+
+
+def _load_npz(path: pathlib.Path, field: str, case_file) -> dict:
+    if not path.is_file():
+        raise ConfigError(f"{case_file}: field '{field}': data file {path} not found")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except Exception as exc:  # a torn or non-NPZ file
+        raise DataError(f"{path}: not a readable NPZ file ({type(exc).__name__}: {exc})") from None
+
+
+def _num(arr, path, field, *, ndim=None, complex_ok=False, allow_nan=False):
+    a = np.asarray(arr)
+    if not (np.issubdtype(a.dtype, np.number)) or (np.iscomplexobj(a) and not complex_ok):
+        raise DataError(f"{path}: field '{field}': expected {'complex ' if complex_ok else 'real '}numbers, got dtype {a.dtype}")
+    if ndim is not None and a.ndim != ndim:
+        raise DataError(f"{path}: field '{field}': expected {ndim} dimension(s), got shape {a.shape}")
+    bad = ~np.isfinite(a)
+    if bad.any() and not allow_nan:
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise DataError(f"{path}: field '{field}': contains NaN/inf, the first at index {idx}")
+    return a.astype(complex if np.iscomplexobj(a) else float)
+
+
+def _columns(arrs, path, robot, width_field: str, width: int):
+    """Map data columns to model joints with the optional ``joints`` name array."""
+    names = tuple(robot.joint_names)
+    if "joints" in arrs:
+        jn = tuple(str(s) for s in np.asarray(arrs["joints"]).ravel())
+        if len(jn) != width:
+            raise DataError(f"{path}: field 'joints': {len(jn)} names but '{width_field}' has {width} columns")
+        missing = [j for j in names if j not in jn]
+        if missing:
+            raise DataError(f"{path}: field 'joints': model joints {missing} are not in the data (joints {list(jn)})")
+        idx = [jn.index(j) for j in names]
+        extra = [i for i in range(width) if jn[i] not in names]
+        return idx, extra, tuple(jn[i] for i in extra)
+    if width != len(names):
+        raise DataError(
+            f"{path}: field '{width_field}': {width} columns but the model has {len(names)} joints {list(names)}; "
+            "add a 'joints' array naming each column when the data records more joints"
+        )
+    return list(range(width)), [], ()
+
+
+def _torque(arrs, path, robot):
+    for k in ("t", "q", "tau"):
+        if k not in arrs:
+            raise DataError(f"{path}: field '{k}': missing (a torque data set needs t (N,), q (N, n), tau (N, n))")
+    t = _num(arrs["t"], path, "t", ndim=1)
+    if t.size < 20:
+        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
+    if np.any(np.diff(t) <= 0):
+        raise DataError(f"{path}: field 't': time must be strictly increasing")
+    q = _num(arrs["q"], path, "q", ndim=2)
+    if q.shape[0] != t.size:
+        raise DataError(f"{path}: field 'q': {q.shape[0]} rows but 't' has {t.size} samples")
+    idx, extra, extra_names = _columns(arrs, path, robot, "q", q.shape[1])
+    n = robot.nq
+    out = {"t": t, "q": q[:, idx], "q_extra": q[:, extra]}
+    tau = _num(arrs["tau"], path, "tau", ndim=2)
+    if tau.shape[0] != t.size:
+        raise DataError(f"{path}: field 'tau': {tau.shape[0]} rows but 't' has {t.size} samples")
+    if tau.shape[1] == q.shape[1] and q.shape[1] != n:
+        tau = tau[:, idx]
+    if tau.shape[1] != n:
+        raise DataError(f"{path}: field 'tau': expected {n} columns (model joints {list(robot.joint_names)}), got {tau.shape[1]}")
+    out["tau"] = tau
+    for k in ("qd", "qdd"):
+        if k in arrs:
+            a = _num(arrs[k], path, k, ndim=2)
+            if a.shape != q.shape:
+                raise DataError(f"{path}: field '{k}': expected shape {q.shape} (as q), got {a.shape}")
+            out[k] = a[:, idx]
+    # derivatives missing: central differences of q (documented; smooth data assumed)
+    if "qd" not in out:
+        out["qd"] = np.gradient(out["q"], t, axis=0)
+    if "qdd" not in out:
+        out["qdd"] = np.gradient(out["qd"], t, axis=0)
+    if "tau_repeats" in arrs:
+        r = _num(arrs["tau_repeats"], path, "tau_repeats", ndim=3)
+        if r.shape[1:] != tau.shape:
+            raise DataError(f"{path}: field 'tau_repeats': expected (R, {tau.shape[0]}, {n}), got {r.shape}")
+        out["tau_repeats"] = r
+    return out, extra_names
+
+
+def _posture(arrs, path, robot):
+    if "q0" not in arrs:
+        raise DataError(f"{path}: field 'q0': missing (the posture (n,) [rad] of the measurement)")
+    q0 = _num(arrs["q0"], path, "q0", ndim=1)
+    idx, extra, names = _columns(arrs, path, robot, "q0", q0.size)
+    return q0[idx], q0[extra], names
+
+
+def _frf(arrs, path, robot):
+    q0, q0x, names = _posture(arrs, path, robot)
+    for k in ("freq", "H"):
+        if k not in arrs:
+            raise DataError(f"{path}: field '{k}': missing (an frf data set needs q0, freq (F,) [Hz], H (F, 3, 3))")
+    f = _num(arrs["freq"], path, "freq", ndim=1)
+    if np.any(f <= 0) or np.any(np.diff(f) <= 0):
+        raise DataError(f"{path}: field 'freq': frequencies must be > 0 Hz and strictly increasing")
+    H = _num(arrs["H"], path, "H", ndim=3, complex_ok=True)
+    if H.shape != (f.size, 3, 3):
+        raise DataError(f"{path}: field 'H': expected shape ({f.size}, 3, 3) (freq x output x input), got {H.shape}")
+    out = {"q0": q0, "q0_extra": q0x, "freq": f, "H": H.astype(complex)}
+    if "H_repeats" in arrs:
+        out["H_repeats"] = _num(arrs["H_repeats"], path, "H_repeats", ndim=4, complex_ok=True).astype(complex)
+    return out, names
+
+
+def _modal(arrs, path, robot):
+    q0, q0x, names = _posture(arrs, path, robot)
+    for k in ("freq", "zeta"):
+        if k not in arrs:
+            raise DataError(f"{path}: field '{k}': missing (a modal data set needs q0, freq (M,) [Hz], zeta (M,))")
+    f = _num(arrs["freq"], path, "freq", ndim=1)
+    z = _num(arrs["zeta"], path, "zeta", ndim=1, allow_nan=True)
+    if np.any(f <= 0):
+        raise DataError(f"{path}: field 'freq': natural frequencies must be > 0 Hz")
+    if z.shape != f.shape:
+        raise DataError(f"{path}: field 'zeta': expected shape {f.shape} (one ratio per mode), got {z.shape}")
+    if np.any(z[np.isfinite(z)] < 0) or np.any(z[np.isfinite(z)] >= 1):
+        raise DataError(f"{path}: field 'zeta': damping ratios must lie in [0, 1) (a ratio, not a percentage)")
+    out = {"q0": q0, "q0_extra": q0x, "freq": f, "zeta": z}
+    if "shapes" in arrs:
+        s = _num(arrs["shapes"], path, "shapes", ndim=2, complex_ok=True)
+        if s.shape[1] != f.size:
+            raise DataError(f"{path}: field 'shapes': expected (s, {f.size}) (one column per mode), got {s.shape}")
+        out["shapes"] = s
+    return out, names
+
+
+def _response(arrs, path, robot):
+    for k in ("t", "tau", "y", "channels"):
+        if k not in arrs:
+            raise DataError(f"{path}: field '{k}': missing (a response data set needs t, tau (N, n), y (N, k), channels (k,))")
+    t = _num(arrs["t"], path, "t", ndim=1)
+    tau = _num(arrs["tau"], path, "tau", ndim=2)
+    y = _num(arrs["y"], path, "y", ndim=2)
+    ch = tuple(str(c) for c in np.asarray(arrs["channels"]).ravel())
+    if tau.shape[0] != t.size or y.shape[0] != t.size:
+        raise DataError(f"{path}: fields 'tau'/'y': expected {t.size} rows (as t), got {tau.shape[0]} and {y.shape[0]}")
+    if len(ch) != y.shape[1]:
+        raise DataError(f"{path}: field 'channels': {len(ch)} names for {y.shape[1]} columns of 'y'")
+    return {"t": t, "tau": tau, "y": y, "channels": ch}, ()
+
+
+_LOADERS = {"torque": _torque, "frf": _frf, "modal": _modal, "response": _response}
+
+
+def load_case(path) -> Case:
+    """Read and validate a case folder (or its ``case.yaml``).
+
+    **Arguments:** ``path``: the folder holding ``case.yaml``, or the YAML file itself.
+
+    **Returns:** a :class:`Case`. Raises :class:`jflex.ConfigError` / :class:`jflex.DataError`
+    naming the file and field of the first problem found.
+    """
+    p = pathlib.Path(path)
+    file = p / "case.yaml" if p.is_dir() else p
+    if not file.is_file():
+        raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
+    cfg = load_yaml(file)
+    base = file.parent
+    known = {"robot", "tool_frame", "nominal_effects", "datasets", "noise", "options", "name", "notes"}
+    for k in cfg:
+        if k not in known:
+            raise _err(file, k, f"unknown field; known fields: {sorted(known)}")
+    if "robot" not in cfg:
+        raise _err(file, "robot", "missing (a URDF file, a robot YAML or a config name such as kuka_kr90)")
+    spec = cfg["robot"]
+    if not isinstance(spec, str):
+        raise _err(file, "robot", f"expected a file name or robot name, got {spec!r}")
+    rp = base / spec
+    try:
+        robot = load_robot(str(rp) if rp.suffix.lower() in (".urdf", ".yaml", ".yml") else spec)
+    except JFlexError as exc:
+        raise ConfigError(f"{file}: field 'robot': {exc}") from None
+    tool = cfg.get("tool_frame")
+    if tool is not None:
+        try:
+            robot.frame_index(tool)
+        except JFlexError:
+            raise _err(file, "tool_frame", f"unknown frame {tool!r}; frames: {list(robot.link_names) + list(robot.frame_names)}") from None
+    nominal = []
+    for i, e in enumerate(cfg.get("nominal_effects") or []):
+        fld = f"nominal_effects[{i}]"
+        if not isinstance(e, dict) or "effect" not in e:
+            raise _err(file, fld, "expected a mapping with 'effect' (and 'joint' where it applies)")
+        if e["effect"] not in EFFECT_NAMES:
+            raise _err(file, fld + ".effect", f"unknown effect {e['effect']!r}; known: {list(EFFECT_NAMES)}")
+        bad = set(e) - {"effect", "joint", *_NOMINAL_EXTRA}
+        if bad:
+            raise _err(file, fld, f"unknown keys {sorted(bad)}; allowed: effect, joint, {', '.join(_NOMINAL_EXTRA)}")
+        joints = _resolve_joints(e.get("joint", "all"), robot, file, fld + ".joint")
+        d = {"effect": e["effect"], "joints": joints}
+        for k in _NOMINAL_EXTRA:
+            if k in e:
+                try:
+                    v = np.broadcast_to(np.asarray(e[k], dtype=float), (len(joints),)).copy()
+                except (TypeError, ValueError):
+                    raise _err(file, f"{fld}.{k}", f"expected a number or {len(joints)} numbers, got {e[k]!r}") from None
+                if not np.all(np.isfinite(v)) or np.any(v < 0):
+                    raise _err(file, f"{fld}.{k}", "values must be finite and >= 0")
+                d[k] = v
+        nominal.append(d)
+    if "datasets" not in cfg or not isinstance(cfg["datasets"], list) or not cfg["datasets"]:
+        raise _err(file, "datasets", "missing or empty (a list of {kind, file, split})")
+    datasets = []
+    for i, d in enumerate(cfg["datasets"]):
+        fld = f"datasets[{i}]"
+        if not isinstance(d, dict):
+            raise _err(file, fld, "expected a mapping {kind, file, split}")
+        for k in ("kind", "file", "split"):
+            if k not in d:
+                raise _err(file, f"{fld}.{k}", "missing")
+        if d["kind"] not in KINDS:
+            raise _err(file, f"{fld}.kind", f"unknown kind {d['kind']!r}; known: {list(KINDS)}")
+        if d["split"] not in SPLITS:
+            raise _err(file, f"{fld}.split", f"expected one of {list(SPLITS)}, got {d['split']!r}")
+        if d["kind"] == "frf" and tool is None:
+            raise _err(file, "tool_frame", f"needed by the frf data set {fld} (FRFs are at the tool frame)")
+        fpath = base / str(d["file"])
+        arrs = _load_npz(fpath, f"{fld}.file", file)
+        data, extra = _LOADERS[d["kind"]](arrs, fpath, robot)
+        datasets.append(Dataset(d["kind"], fpath, d["split"], str(d.get("name", fpath.stem)), data, extra))
+    names = [d.name for d in datasets]
+    if len(set(names)) != len(names):
+        raise _err(file, "datasets", f"data set names must be unique, got {names}")
+    if not any(d.split == "train" for d in datasets):
+        raise _err(file, "datasets", "no data set has split: train (the nominal model is fitted on it)")
+    if not any(d.split == "validation" for d in datasets):
+        raise _err(file, "datasets", "no data set has split: validation (the gap is judged on held-out data)")
+    noise = cfg.get("noise") or {}
+    if not isinstance(noise, dict):
+        raise _err(file, "noise", "expected a mapping, e.g. {modal_frequency_pct: 1.0}")
+    options = cfg.get("options") or {}
+    if not isinstance(options, dict):
+        raise _err(file, "options", "expected a mapping")
+    return Case(file, robot, tool, nominal, datasets, noise, options)

@@ -1,0 +1,692 @@
+"""Sim-to-real gap diagnosis: where the gap lies, which unmodelled effect causes it, how far it
+shrinks once that effect is added and refitted, judged on held-out validation data.
+
+The gap of a validation data set is its NRMSE [%]: torques ``rms(tau_model - tau) / std(tau)``
+per joint; FRFs ``sqrt(sum |H_model - H|^2 / sum |H|^2)`` per entry; modal tables the RMS
+relative frequency error (unmatched measured modes included through their nearest model mode)
+plus ``0.1 x`` the relative damping error. The noise floor is the NRMSE that measurement noise
+alone would leave (from repeated records, else from the residual's high-frequency content), and
+the *excess* gap ``sqrt(max(nrmse^2 - floor^2, 0))`` is what a model can close: ``shrink`` is
+the percentage of the excess closed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ._case import Case, load_case
+from . import _linear as L
+from . import _torque as T
+
+TORQUE_EFFECTS = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
+                  "backlash", "payload", "sensor_delay")
+LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "hysteretic_damping",
+                  "fractional_damping", "payload")
+# pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
+CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
+                                     ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
+                                     ("coulomb_friction", "backlash"), ("coulomb_friction", "stribeck_friction"),
+                                     ("orthogonal_compliance", "link_flexibility"),
+                                     ("fractional_damping", "hysteretic_damping")]}
+SIGNIFICANCE = 1.2  # a gap is significant when nrmse > 1.2 x its noise floor (+ MIN_GAP)
+MIN_GAP = 0.2  # [%] below this a gap is never significant
+MIN_STEP_SHRINK = 10.0  # [%] of the current excess an added effect must close to be selected
+
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    """An effect placed at a joint (index) or link (index) or nowhere (None)."""
+
+    effect: str
+    joint: int | None = None
+
+    def label(self, names):
+        return self.effect if self.joint is None else f"{self.effect}@{names[self.joint]}"
+
+
+@dataclasses.dataclass
+class State:
+    """A model under diagnosis: torque terms and the linear structure with their fitted values."""
+
+    tfit: object | None
+    lm: object | None
+    x: np.ndarray | None
+    added: tuple = ()
+
+
+# ---------------------------------------------------------------------------------------------
+class Problem:
+    """Precomputed data of a case for repeated refits."""
+
+    def __init__(self, case: Case):
+        self.case = case
+        self.robot = case.robot
+        self.names = tuple(self.robot.joint_names)
+        self.n = self.robot.nq
+        self.ttrain = [T.torque_set(self.robot, d) for d in case.split("train", "torque")]
+        self.tval = [T.torque_set(self.robot, d) for d in case.split("validation", "torque")]
+        self.ftrain = [d for d in case.datasets if d.split == "train" and d.kind in ("frf", "modal")]
+        self.fval = [d for d in case.datasets if d.split == "validation" and d.kind in ("frf", "modal")]
+        self.responses = [d for d in case.datasets if d.kind == "response"]
+        self.nominal = {(e["effect"], self.names.index(j)) for e in case.nominal_effects for j in e["joints"]}
+        self.nominal_effects = case.nominal_effects
+
+    # --- nominal model -------------------------------------------------------------------------
+    def nominal_state(self) -> State:
+        terms, delay = [], 0.0
+        for e in self.nominal_effects:
+            if e["effect"] in TORQUE_EFFECTS and e["effect"] not in ("payload", "sensor_delay"):
+                for j in e["joints"]:
+                    h = {"stribeck_friction": T.STRIBECK_VS[2], "backlash": 0.01}.get(e["effect"])
+                    terms.append(T.Term(e["effect"], self.names.index(j), h))
+            elif e["effect"] == "payload":
+                terms.append(T.Term("payload", None))
+            elif e["effect"] == "sensor_delay":
+                delay = float(e.get("value", [0.0])[0])
+                terms.append(T.Term("sensor_delay", None, delay))
+        tfit = T.fit_terms(tuple(terms), delay, self.ttrain) if self.ttrain else None
+        lm = x = None
+        if self.ftrain or self.fval:
+            springs, x0 = [], []
+            for e in self.nominal_effects:
+                if e["effect"] == "joint_flexibility":
+                    law = "viscous"
+                    for j in e["joints"]:
+                        springs.append(L.Spring("joint", self.names.index(j), law=law))
+                    k = e.get("stiffness", np.full(len(e["joints"]), 1e5))
+                    c = e.get("damping", 1e-3 * k)
+                    x0.append((np.log(k), np.log(np.maximum(c, 1e-9))))
+            # hysteretic / fractional nominal laws switch the spring at that joint
+            laws = {}
+            for e in self.nominal_effects:
+                if e["effect"] in ("hysteretic_damping", "fractional_damping"):
+                    for j in e["joints"]:
+                        laws[self.names.index(j)] = "hysteretic" if e["effect"] == "hysteretic_damping" else "fractional"
+            springs = [dataclasses.replace(s, law=laws.get(s.where, s.law)) for s in springs]
+            ks = np.concatenate([a for a, _ in x0]) if x0 else np.zeros(0)
+            cs = np.concatenate([b for _, b in x0]) if x0 else np.zeros(0)
+            structure = L.LinearStructure(tuple(springs), payload=False)
+            lm = L.LinearModel(self.robot, structure, self.case.tool_frame)
+            x = np.concatenate([ks, cs])
+            if self.ftrain and len(springs):
+                x, _ = L.fit_linear(lm, x, self.ftrain)
+        return State(tfit, lm, x)
+
+    # --- candidates ----------------------------------------------------------------------------
+    def candidates(self) -> list[Candidate]:
+        out = []
+        nom = {e for e, _ in self.nominal}
+        if self.ttrain:
+            for eff in TORQUE_EFFECTS:
+                if eff in ("payload", "sensor_delay"):
+                    if eff not in nom:
+                        out.append(Candidate(eff, None))
+                    continue
+                for j in range(self.n):
+                    if (eff, j) in self.nominal:
+                        continue
+                    if eff == "coulomb_friction" and ("stribeck_friction", j) in self.nominal:
+                        continue
+                    out.append(Candidate(eff, j))
+        if self.ftrain:
+            flex = {s.where for s in self._nominal_springs()}
+            for j in range(self.n):
+                if j not in flex:
+                    out.append(Candidate("joint_flexibility", j))
+                out.append(Candidate("orthogonal_compliance", j))
+                out.append(Candidate("link_flexibility", j))
+                if j in flex:
+                    if ("hysteretic_damping", j) not in self.nominal:
+                        out.append(Candidate("hysteretic_damping", j))
+                    if ("fractional_damping", j) not in self.nominal:
+                        out.append(Candidate("fractional_damping", j))
+            if "payload" not in nom and not self.ttrain:
+                out.append(Candidate("payload", None))
+        return out
+
+    def _nominal_springs(self):
+        return [L.Spring("joint", self.names.index(j)) for e in self.nominal_effects
+                if e["effect"] == "joint_flexibility" for j in e["joints"]]
+
+    # --- refits --------------------------------------------------------------------------------
+    def add(self, state: State, cand: Candidate) -> State:
+        """Refit with ``cand`` added (warm start from ``state``)."""
+        tfit, lm, x = state.tfit, state.lm, state.x
+        if cand.effect in TORQUE_EFFECTS and self.ttrain:
+            if cand.effect == "sensor_delay":
+                base = tuple(t for t in tfit.terms if t.effect != "sensor_delay")
+                tfit = T.fit_with(base, 0.0, T.Term("sensor_delay", None), self.ttrain)
+            else:
+                tfit = T.fit_with(tfit.terms, tfit.delay, T.Term(cand.effect, cand.joint, T.STRIBECK_VS[2]), self.ttrain)
+        if cand.effect in LINEAR_EFFECTS and self.ftrain and lm is not None:
+            lm, x = self._add_linear(lm, x, cand)
+        return State(tfit, lm, x, state.added + (cand,))
+
+    def _add_linear(self, lm, x, cand):
+        st = lm.structure
+        S = len(st.springs)
+        ks, cs = list(x[:S]), list(x[S:2 * S])
+        pay = list(x[2 * S:]) if st.payload else []
+        springs = list(st.springs)
+        new_idx = []
+        if cand.effect in ("hysteretic_damping", "fractional_damping"):
+            i = next(i for i, s in enumerate(springs) if s.kind == "joint" and s.where == cand.joint)
+            best = None
+            alphas = L.ALPHAS if cand.effect == "fractional_damping" else (0.5,)
+            for a in alphas:
+                sp = list(springs)
+                sp[i] = dataclasses.replace(sp[i], law="hysteretic" if cand.effect == "hysteretic_damping" else "fractional", alpha=a)
+                lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+                lm2._cache = {}  # geometry unchanged, but keep it simple and correct
+                x2 = np.array(x, float)
+                w = 2 * np.pi * self._ref_freq()
+                k = np.exp(x2[i])
+                c = np.exp(x2[S + i])
+                # the same loss at the reference frequency: eta = w c / k, c_frac = w c / w^alpha
+                x2[S + i] = np.log(w * c / k) if cand.effect == "hysteretic_damping" else np.log(w * c / w**a)
+                xf, cost = L.fit_linear(lm2, x2, self.ftrain)
+                if best is None or cost < best[0]:
+                    best = (cost, lm2, xf)
+            return best[1], best[2]
+        if cand.effect == "payload":
+            st2 = L.LinearStructure(tuple(springs), True)
+            lm2 = L.LinearModel(self.robot, st2, self.case.tool_frame)
+            xs = [np.concatenate([ks, cs, [np.log(m)]]) for m in (0.1, 1.0, 10.0)]
+            xf, _ = L.fit_linear(lm2, xs[0], self.ftrain, starts=xs[1:])
+            return lm2, xf
+        if cand.effect == "joint_flexibility":
+            new = [L.Spring("joint", cand.joint)]
+        elif cand.effect == "orthogonal_compliance":
+            new = [L.Spring("orth", cand.joint, 0), L.Spring("orth", cand.joint, 1)]
+        else:
+            new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1)]
+        sp = springs + new
+        lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+        # starting stiffnesses: place the new modes near the measured modes the model misses
+        P = lm2.mats(self._ref_posture())
+        targets = self._unmatched_freqs(lm, x) or [self._ref_freq()]
+        starts = []
+        for ft in targets[:2]:
+            for scale in (0.5, 1.0, 2.0):
+                nk, nc = [], []
+                for s in range(len(new)):
+                    ii = S + s
+                    meff = max(P.M[ii, ii] - P.M[ii, :S] @ np.linalg.solve(P.M[:S, :S], P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
+                    k = scale * (2 * np.pi * ft) ** 2 * meff * (1.0 + 0.3 * s)
+                    nk.append(np.log(k))
+                    nc.append(np.log(2 * 0.02 * np.sqrt(k * meff)))
+                starts.append(np.concatenate([ks, nk, cs, nc, pay]))
+        xf, _ = L.fit_linear(lm2, starts[0], self.ftrain, starts=starts[1:])
+        return lm2, xf
+
+    def _ref_posture(self):
+        return self.ftrain[0].arrays["q0"]
+
+    def _ref_freq(self):
+        fs = []
+        for d in self.ftrain:
+            a = d.arrays
+            if d.kind == "modal":
+                fs += list(a["freq"])
+            else:
+                fs.append(a["freq"][np.argmax(np.abs(a["H"]).sum(axis=(1, 2)))])
+        return float(np.median(fs)) if fs else 10.0
+
+    def _unmatched_freqs(self, lm, x):
+        out = []
+        for d in self.ftrain:
+            a = d.arrays
+            if d.kind == "modal":
+                f, _ = lm.modes(x, a["q0"])
+                _, rel = L.match_modes(f, a["freq"])
+                out += [float(fm) for fm, r in zip(a["freq"], rel) if abs(r) > 0.05]
+            else:
+                Hm = lm.frf(x, a["q0"], a["freq"])
+                e = np.abs(Hm - a["H"]).sum(axis=(1, 2))
+                out.append(float(a["freq"][np.argmax(e)]))
+        return out
+
+    # --- evaluation ----------------------------------------------------------------------------
+    def evaluate(self, state: State, sets="validation") -> dict:
+        """Per data set: nrmse [%], per channel [%], mse and effective sample count."""
+        tsets = self.tval if sets == "validation" else self.ttrain
+        fsets = self.fval if sets == "validation" else self.ftrain
+        out = {}
+        for s in tsets:
+            pred = T.predict(state.tfit, s)
+            e = (pred - s.tau) / s.scale
+            ch = np.sqrt(np.mean(e**2, axis=0)) * 100
+            out[s.name] = dict(kind="torque", nrmse=float(np.sqrt(np.mean(e**2)) * 100),
+                               channels={self.names[j]: float(ch[j]) for j in range(self.n)},
+                               neff=e.size / 10.0, resid=e)
+        for d in fsets:
+            a = d.arrays
+            if d.kind == "frf":
+                Hm = state.lm.frf(state.x, a["q0"], a["freq"]) if state.lm is not None else np.zeros_like(a["H"])
+                err = Hm - a["H"]
+                ok = L.frf_entries(a["H"])
+                tot = np.sqrt(np.sum(np.abs(err[:, ok]) ** 2) / np.sum(np.abs(a["H"][:, ok]) ** 2)) * 100
+                s = L.frf_scale(a["H"])
+                ch = {f"H_{'xyz'[i]}{'xyz'[j]}": float(np.sqrt(np.mean(np.abs(err[:, i, j]) ** 2)) / s[i, j] * 100)
+                      for i in range(3) for j in range(3) if ok[i, j]}
+                out[d.name] = dict(kind="frf", nrmse=float(tot), channels=ch, neff=err[:, ok].size / 4.0, err=err, Hm=Hm)
+            else:
+                if state.lm is None:
+                    ef = np.ones(len(a["freq"]))
+                    ez = np.zeros_like(ef)
+                    idx, f, z = np.full(len(ef), -1), np.zeros(0), np.zeros(0)
+                else:
+                    ef, ez, idx, f, z = L.modal_errors(state.lm, state.x, a)
+                tot = np.sqrt(np.mean(ef**2) + np.mean((L.DAMPING_WEIGHT * ez) ** 2)) * 100
+                ch = {f"mode{k + 1}@{a['freq'][k]:.1f}Hz": float(abs(ef[k]) * 100) for k in range(len(ef))}
+                out[d.name] = dict(kind="modal", nrmse=float(tot), channels=ch, neff=float(len(ef)), ef=ef, ez=ez,
+                                   idx=idx, f_model=f, z_model=z)
+        return out
+
+
+# --- noise floor --------------------------------------------------------------------------------
+def _mad_sigma(x):
+    x = np.asarray(x).ravel()
+    return 1.4826 * np.median(np.abs(x - np.median(x)))
+
+
+def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
+    """NRMSE [%] that noise alone leaves, per validation data set.
+
+    Torque: from ``tau_repeats`` when recorded, else the robust (MAD) spread of the residual's
+    second difference, ``sigma = MAD(d2 r) / sqrt(6)`` (white noise: var(d2) = 6 sigma^2; the
+    smooth model error barely enters, and the median ignores the few jumps at reversals).
+    FRF: ``H_repeats`` when recorded, else the same on the real and imaginary parts of the
+    residual along frequency. Modal tables: ``noise.modal_frequency_pct`` of the case (default 1).
+    """
+    out = {}
+    by_name = {d.name: d for d in case.datasets}
+    for name, r in ev.items():
+        d = by_name[name]
+        if r["kind"] == "torque":
+            s = next(s for s in problem.tval if s.name == name)
+            if "tau_repeats" in d.arrays:
+                rep = d.arrays["tau_repeats"]
+                sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale
+            else:
+                e = r["resid"]
+                d2 = e[2:] - 2 * e[1:-1] + e[:-2]
+                sig = np.array([_mad_sigma(d2[:, j]) / np.sqrt(6) for j in range(e.shape[1])])
+            out[name] = float(np.sqrt(np.mean(sig**2)) * 100)
+        elif r["kind"] == "frf":
+            a = d.arrays
+            ok = L.frf_entries(a["H"])
+            scale = L.frf_scale(a["H"])
+            if "H_repeats" in a:
+                sig = np.sqrt(np.mean(np.abs(a["H_repeats"] - a["H_repeats"].mean(axis=0)) ** 2, axis=(0, 1)))
+                out[name] = float(np.sqrt(np.mean((sig[ok] / scale[ok]) ** 2)) * 100)
+            else:
+                e = r["err"][:, ok] / scale[ok]
+                d2 = e[2:] - 2 * e[1:-1] + e[:-2]
+                sig = np.sqrt(_mad_sigma(d2.real) ** 2 + _mad_sigma(d2.imag) ** 2) / np.sqrt(6)
+                out[name] = float(sig * 100)
+        else:
+            out[name] = float(case.noise.get("modal_frequency_pct", 1.0))
+    return out
+
+
+def _combine(ev, floor):
+    names = list(ev)
+    g = np.array([ev[k]["nrmse"] for k in names])
+    f = np.array([floor[k] for k in names])
+    gap = float(np.sqrt(np.mean(g**2)))
+    fl = float(np.sqrt(np.mean(f**2)))
+    exc = float(np.sqrt(np.mean(np.maximum(g**2 - f**2, 0.0))))
+    return gap, fl, exc
+
+
+def _significant(ev, floor):
+    return any(ev[k]["nrmse"] > SIGNIFICANCE * floor[k] + MIN_GAP for k in ev)
+
+
+def _ic_delta(ev_new, ev_old, p_new):
+    """Held-out information criterion change (BIC form): sum_d Neff_d ln(mse_new / mse_old) + p ln(N)."""
+    d = 0.0
+    ntot = 0.0
+    for k in ev_new:
+        ne = ev_new[k]["neff"]
+        ntot += ne
+        d += ne * np.log(max(ev_new[k]["nrmse"], 1e-9) ** 2 / max(ev_old[k]["nrmse"], 1e-9) ** 2)
+    return d + p_new * np.log(max(ntot, 2.0))
+
+
+NESTED = {"stribeck_friction": "coulomb_friction"}  # complex -> the simpler effect it contains
+PARSIMONY = 3.0  # [%] a nested simpler effect within this shrink of the richer one ranks first
+
+
+def _rank(entries) -> list[int]:
+    """Order by held-out criterion; a simpler nested effect at the same place that closes nearly
+    as much (within PARSIMONY points of shrink) goes first."""
+    order = sorted(range(len(entries)), key=lambda i: -entries[i]["score"])
+    changed = True
+    while changed:
+        changed = False
+        for a in range(len(order)):
+            ea = entries[order[a]]
+            simple = NESTED.get(ea["effect"])
+            if simple is None:
+                continue
+            for b in range(a + 1, len(order)):
+                eb = entries[order[b]]
+                if eb["effect"] == simple and eb["joint"] == ea["joint"] and eb["shrink"] >= ea["shrink"] - PARSIMONY:
+                    order.insert(a, order.pop(b))
+                    changed = True
+                    break
+            if changed:
+                break
+    return order
+
+
+def _n_params(c: Candidate) -> int:
+    return {"stribeck_friction": 3, "gravity_compensator": 4, "payload": 10, "orthogonal_compliance": 4,
+            "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2}.get(c.effect, 1)
+
+
+# --- signatures -----------------------------------------------------------------------------------
+def signatures(problem: Problem, state: State, cands) -> dict:
+    """A cheap score per torque candidate before any refit: the largest |correlation| between the
+    training residual and the candidate's columns (sign of velocity for Coulomb, posture harmonics
+    for compensators, d tau/dt for a delay, held sign x gravity stiffness for backlash)."""
+    out = {}
+    if not problem.ttrain:
+        return out
+    res = [(T.predict(state.tfit, s) - s.tau) / s.scale for s in problem.ttrain]
+    for c in cands:
+        if c.effect not in TORQUE_EFFECTS:
+            continue
+        best = 0.0
+        for s, r in zip(problem.ttrain, res):
+            if c.effect == "sensor_delay":
+                cols = (np.gradient(T.predict(state.tfit, s), s.t, axis=0) / s.scale)[:, :, None]
+            else:
+                h = {"stribeck_friction": T.STRIBECK_VS[1], "backlash": 0.01}.get(c.effect)
+                cols = T.Term(c.effect, c.joint, h).columns(s) / s.scale[None, :, None]
+            for k in range(cols.shape[2]):
+                v = cols[:, :, k].ravel()
+                nv = np.linalg.norm(v)
+                if nv > 0:
+                    best = max(best, abs(v @ r.ravel()) / (nv * np.linalg.norm(r)))
+        out[c] = best
+    return out
+
+
+SIGNATURE_NAMES = {
+    "viscous_friction": "correlation with joint velocity", "coulomb_friction": "correlation with sign of velocity",
+    "stribeck_friction": "sign of velocity, larger at low speed", "rotor_inertia": "correlation with joint acceleration",
+    "gravity_compensator": "posture harmonics of the joint angle", "backlash": "dead zone at reversals (held sign x gravity stiffness)",
+    "payload": "tool-mass regressor columns", "sensor_delay": "phase lag: correlation with d tau/dt",
+    "joint_flexibility": "extra FRF peak / unmatched mode", "orthogonal_compliance": "extra FRF peak / unmatched mode",
+    "link_flexibility": "extra FRF peak / unmatched mode", "hysteretic_damping": "damping ratio flat in frequency",
+    "fractional_damping": "damping ratio growing as w^(alpha-1)",
+}
+
+
+# --- where -------------------------------------------------------------------------------------
+def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 8, n_bands: int = 8) -> list:
+    """Localise the validation gap: data set x channel, time windows, frequency bands, postures."""
+    out = []
+    by_name = {d.name: d for d in case.datasets}
+    for name, r in ev.items():
+        d = by_name[name]
+        for ch, v in r["channels"].items():
+            item = dict(dataset=name, channel=ch, nrmse=v, floor=floor[name])
+            if r["kind"] != "torque" and "q0" in d.arrays:
+                item["posture"] = _posture_dict(problem, d)
+            if r["kind"] == "modal":
+                k = int(ch[4:ch.index("@")]) - 1
+                f = float(d.arrays["freq"][k])
+                item["band_hz"] = [f, f]
+                item["unmatched"] = bool(abs(r["ef"][k]) > 0.1)
+            out.append(item)
+        if r["kind"] == "torque":
+            s = next(s for s in problem.tval if s.name == name)
+            e = r["resid"]
+            edges = np.linspace(0, len(s.t), n_windows + 1).astype(int)
+            for j in range(problem.n):
+                for a, b in zip(edges[:-1], edges[1:]):
+                    out.append(dict(dataset=name, channel=problem.names[j], window_s=[float(s.t[a]), float(s.t[b - 1])],
+                                    nrmse=float(np.sqrt(np.mean(e[a:b, j] ** 2)) * 100), floor=floor[name]))
+                # residual spectrum: the band holding most of the residual's energy
+                fs = 1.0 / np.mean(np.diff(s.t))
+                spec = np.abs(np.fft.rfft(e[:, j])) ** 2
+                fr = np.fft.rfftfreq(len(e), 1 / fs)
+                bands = np.geomspace(max(fr[1], 1e-3), fr[-1], n_bands + 1)
+                for lo, hi in zip(bands[:-1], bands[1:]):
+                    m = (fr >= lo) & (fr < hi)
+                    val = float(np.sqrt(spec[m].sum() / spec.sum()) * r["channels"][problem.names[j]]) if m.any() else 0.0
+                    out.append(dict(dataset=name, channel=problem.names[j], band_hz=[float(lo), float(hi)], nrmse=val,
+                                    floor=floor[name]))
+        if r["kind"] == "frf":
+            a = d.arrays
+            ok = L.frf_entries(a["H"])
+            tot = np.sqrt(np.mean(np.abs(a["H"][:, ok]) ** 2))
+            bands = np.geomspace(a["freq"][0], a["freq"][-1] * 1.0001, n_bands + 1)
+            for lo, hi in zip(bands[:-1], bands[1:]):
+                m = (a["freq"] >= lo) & (a["freq"] < hi)
+                if m.any():
+                    v = float(np.sqrt(np.mean(np.abs(r["err"][m][:, ok]) ** 2)) / tot * 100)
+                    out.append(dict(dataset=name, channel="tool", band_hz=[float(lo), float(hi)], nrmse=v, floor=floor[name],
+                                    posture=_posture_dict(problem, d)))
+    out += posture_correlation(problem, ev, case)
+    out.sort(key=lambda w: -w["nrmse"])
+    return out
+
+
+def _posture_dict(problem, d):
+    a = d.arrays
+    p = {problem.names[j]: float(np.degrees(a["q0"][j])) for j in range(problem.n)}
+    p.update({nm: float(np.degrees(v)) for nm, v in zip(d.extra_joints, a.get("q0_extra", []))})
+    return {"q_deg": p}
+
+
+def posture_correlation(problem, ev, case) -> list:
+    """Correlation of the error with posture variables (model joints and joints the model leaves
+    out): within torque records (squared residual vs q_j), and across modal/FRF postures (error of
+    each mode/entry vs q0)."""
+    out = []
+    by_name = {d.name: d for d in case.datasets}
+    for name, r in ev.items():
+        if r["kind"] != "torque":
+            continue
+        s = next(s for s in problem.tval if s.name == name)
+        e2 = r["resid"] ** 2
+        vars_ = {problem.names[j]: s.q[:, j] for j in range(problem.n)}
+        vars_.update({nm: s.q_extra[:, i] for i, nm in enumerate(s.extra_joints)})
+        for j in range(problem.n):
+            for vn, v in vars_.items():
+                if np.std(v) < 1e-9:
+                    continue
+                c = float(np.corrcoef(v, e2[:, j])[0, 1])
+                out.append(dict(dataset=name, channel=problem.names[j], posture={"variable": vn, "corr": c},
+                                nrmse=float(abs(c) * r["channels"][problem.names[j]])))
+    # across postures: modal sets with the same number of modes, or FRF sets
+    sets = [(n_, r) for n_, r in ev.items() if r["kind"] in ("modal", "frf")]
+    if len(sets) >= 3:
+        chans = sorted(set.intersection(*[set(_chan_keys(r)) for _, r in sets]))
+        for ch in chans:
+            errs = np.array([_chan_keys(r)[ch] for _, r in sets])
+            ds = [by_name[n_] for n_, _ in sets]
+            vars_ = {}
+            for j in range(problem.n):
+                vars_[problem.names[j]] = np.array([d.arrays["q0"][j] for d in ds])
+            extra = set.intersection(*[set(d.extra_joints) for d in ds]) if ds else set()
+            for nm in sorted(extra):
+                vars_[nm] = np.array([d.arrays["q0_extra"][list(d.extra_joints).index(nm)] for d in ds])
+            for vn, v in vars_.items():
+                if np.std(v) < 1e-9 or np.std(errs) < 1e-12:
+                    continue
+                c = float(np.corrcoef(v, errs)[0, 1])
+                worst = int(np.argmax(errs))
+                out.append(dict(dataset=",".join(n_ for n_, _ in sets), channel=ch,
+                                posture={"variable": vn, "corr": c, "worst_at_deg": float(np.degrees(v[worst])),
+                                         "worst_dataset": sets[worst][0]},
+                                nrmse=float(abs(c) * errs.max())))
+    return out
+
+
+def _chan_keys(r):
+    # modal channels are named with their measured frequency; compare across postures by mode number
+    if r["kind"] == "modal":
+        return {f"mode{k + 1}": abs(float(r["ef"][k])) * 100 for k in range(len(r["ef"]))}
+    return {"frf": r["nrmse"]}
+
+
+# --- the diagnosis -------------------------------------------------------------------------------
+@dataclasses.dataclass
+class Diagnosis:
+    """Everything ``diagnosis.json`` holds, plus the fitted states for plots."""
+
+    result: dict
+    problem: Problem
+    nominal: State
+    final: State
+    steps: list
+
+
+def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None):
+    gap, fl, exc = _combine(ev, floor)
+    _, _, exc0 = _combine(ev0, floor)
+    shrink = 100.0 * (1 - exc / exc0) if exc0 > 0 else 0.0
+    g0 = _combine(ev0, floor)[0]
+    e = dict(effect=c.effect, joint=None if c.joint is None or c.effect == "link_flexibility" else problem.names[c.joint],
+             link=problem.robot.link_names[c.joint] if c.effect == "link_flexibility" else None,
+             score=float(score), gap_after=gap, shrink=float(np.clip(shrink, 0, 100)),
+             shrink_raw=float(100 * (1 - gap / g0)) if g0 > 0 else 0.0,
+             per_dataset={k: v["nrmse"] for k, v in ev.items()})
+    if sig is not None:
+        e["signature"] = {"name": SIGNATURE_NAMES[c.effect], "value": float(sig)}
+    return e
+
+
+def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> Diagnosis:
+    """Fit the nominal model on the training data, localise the validation gap, test candidate
+    effects and select a set by forward selection on held-out data.
+
+    **Arguments:**
+
+    - ``case``: a :class:`jflex.gap.Case` or a path to a case folder / ``case.yaml``.
+    - ``max_effects``: most effects to add; ``prune``: torque candidates refitted per round,
+      the best by residual signature (frequency-side candidates are few and all refitted).
+    - ``progress``: optional ``callable(str)`` for progress lines.
+
+    **Returns:** a :class:`Diagnosis`; ``.result`` is the mapping written to ``diagnosis.json``.
+    """
+    t0 = time.perf_counter()
+    say = progress or (lambda s: None)
+    if not isinstance(case, Case):
+        case = load_case(case)
+    pb = Problem(case)
+    say(f"nominal fit ({len(pb.ttrain)} torque, {len(pb.ftrain)} frf/modal training sets)")
+    nom = pb.nominal_state()
+    ev0 = pb.evaluate(nom)
+    floor = noise_floor(pb, ev0, case)
+    gap0, fl, exc0 = _combine(ev0, floor)
+    significant = _significant(ev0, floor)
+    cands = pb.candidates()
+    sig = signatures(pb, nom, cands)
+    tc = sorted([c for c in cands if c in sig], key=lambda c: -sig[c])
+    keep = tc[:prune] + [c for c in cands if c not in sig]
+    say(f"gap {gap0:.2f} % (noise floor {fl:.2f} %), {len(cands)} candidates, {len(keep)} refitted")
+    ranking, fitted = [], {}
+    for c in keep:
+        st = pb.add(nom, c)
+        ev = pb.evaluate(st)
+        score = -_ic_delta(ev, ev0, _n_params(c))
+        fitted[c] = (st, ev)
+        ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c)))
+        say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
+    order = _rank(ranking)
+    ranking = [ranking[i] for i in order]
+    keep = [keep[i] for i in order]
+    # forward selection
+    steps = [dict(added=None, gap=gap0, excess=exc0, per_dataset={k: v["nrmse"] for k, v in ev0.items()})]
+    selected, state, ev_cur = [], nom, ev0
+    pool = list(keep)
+    while significant and len(selected) < max_effects and pool:
+        _, _, exc_cur = _combine(ev_cur, floor)
+        best = None
+        for c in pool[: max(prune, 6)]:
+            if any(c.effect == s.effect and c.joint == s.joint for s in state.added):
+                continue
+            if not selected:
+                st, ev = fitted[c]
+            else:
+                st = pb.add(state, c)
+                ev = pb.evaluate(st)
+            score = -_ic_delta(ev, ev_cur, _n_params(c))
+            _, _, exc = _combine(ev, floor)
+            step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
+            key = score
+            if best is not None and NESTED.get(best[1].effect) == c.effect and best[1].joint == c.joint \
+                    and step_shrink >= best[5] - PARSIMONY:
+                key = best[0] + 1e-9  # the simpler nested effect wins a near tie
+            elif best is not None and NESTED.get(c.effect) == best[1].effect and best[1].joint == c.joint \
+                    and best[5] >= step_shrink - PARSIMONY:
+                key = -np.inf
+            if best is None or key > best[0]:
+                best = (key, c, st, ev, score, step_shrink)
+        if best is None:
+            break
+        _, c, st, ev, score, step_shrink = best
+        if score <= 0 or step_shrink < MIN_STEP_SHRINK:
+            break
+        selected.append(_entry(pb, c, ev, ev0, floor, score))
+        selected[-1]["step_shrink"] = float(step_shrink)
+        state, ev_cur = st, ev
+        pool = [p for p in pool if p != c]
+        g, _, e = _combine(ev, floor)
+        steps.append(dict(added=c.label(pb.names), gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()}))
+        say(f"selected {c.label(pb.names)}: gap {g:.2f} %")
+        if not _significant(ev, floor):
+            break
+    # ambiguity: a known confounded pair whose held-out scores are too close to call
+    ambiguous = []
+    if len(ranking) >= 2 and significant:
+        a, b = ranking[0], ranking[1]
+        pair = frozenset((a["effect"], b["effect"]))
+        if a["effect"] != b["effect"] and abs(a["shrink"] - b["shrink"]) < 5.0:
+            ambiguous.append(dict(effects=[a["effect"], b["effect"]], joints=[a["joint"], b["joint"]],
+                                  known_pair=pair in CONFOUNDED, shrink=[a["shrink"], b["shrink"]]))
+    gap_after, _, exc_after = _combine(ev_cur, floor)
+    wh = where(pb, ev0, floor, case)
+    result = dict(
+        case=str(case.path), gap_before=gap0, gap_after=gap_after, noise_floor=fl,
+        noise_floor_per_dataset=floor, excess_before=exc0, excess_after=exc_after,
+        shrink=float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0,
+        significant=bool(significant), remaining_significant=bool(_significant(ev_cur, floor)),
+        where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
+        parameters=_parameters(pb, state), nominal_parameters=_parameters(pb, nom),
+        unmatched_modes=[w for w in wh if w.get("unmatched")],
+        responses_not_modelled=[d.name for d in pb.responses],
+        seconds=time.perf_counter() - t0,
+        units={"gap": "NRMSE %", "noise_floor": "NRMSE %", "shrink": "% of the excess over noise closed"},
+    )
+    return Diagnosis(result, pb, nom, state, steps)
+
+
+def _parameters(pb: Problem, st: State) -> dict:
+    out = {}
+    if st.tfit is not None:
+        out["torque"] = T.term_parameters(st.tfit, pb.names)
+    if st.lm is not None:
+        sp = st.lm.structure.springs
+        S = len(sp)
+        lin = {}
+        for i, s in enumerate(sp):
+            nm = {"joint": pb.names[s.where], "orth": f"{pb.names[s.where]}_orth_{'ab'[s.axis]}",
+                  "link": f"{pb.robot.link_names[s.where]}_bend_{'ab'[s.axis]}"}[s.kind]
+            lin[nm] = {"stiffness [N m/rad]": float(np.exp(st.x[i])), "law": s.law,
+                       {"viscous": "damping [N m s/rad]", "hysteretic": "loss factor eta",
+                        "fractional": f"c [N m s^{s.alpha}/rad]"}[s.law]: float(np.exp(st.x[S + i]))}
+        if st.lm.structure.payload:
+            lin["payload"] = {"mass [kg]": float(np.exp(st.x[2 * S]))}
+        out["linear"] = lin
+    return out

@@ -1,0 +1,361 @@
+"""Frequency-side terms of the gap diagnosis: a linear model at each measured posture.
+
+The motors are held (perfect position control, seed 003's assumption), so the linear model
+lives on the *elastic* coordinates: the link side of each flexible joint (a spring to the held
+motor) and the virtual joints that candidates insert into the kinematic tree:
+
+- ``orthogonal_compliance`` at joint j: two virtual revolute joints at joint j's origin, about
+  the two axes perpendicular to its rotation axis, each with a spring (bearing tilt);
+- ``link_flexibility`` of link i: two virtual bending hinges at mid-span of link i, about the
+  axes perpendicular to the link (its first bending mode, lumped);
+- ``joint_flexibility`` at joint j: a torsion spring at a joint the nominal model holds rigid;
+- ``payload``: a point mass at the tool frame.
+
+Rigid joints are locked at the posture. With ``x`` the elastic coordinates,
+
+$$ D(\\omega) = K_g - \\omega^2 M + \\sum_s E_s\\, d_s(\\omega), \\qquad H = J D^{-1} J^T, $$
+
+where ``M``, ``K_g = dG/dq`` and the tool Jacobian ``J`` come from :func:`jflex.crba`,
+:func:`jflex.gravity_stiffness` and :func:`jflex.jacobian` of the augmented robot, and each
+spring's law ``d_s`` is viscous ``k + i w c``, hysteretic ``k (1 + i eta)`` or fractional
+``k + c (i w)^alpha``. This equals :func:`jflex.linearize` of
+``Model(robot, [FlexibleJoints(..., coupling=False)])`` with the motors held for the nominal
+structure (checked in the tests).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+import scipy.optimize as so
+
+from .._dynamics import crba, jacobian
+from .._model import gravity_stiffness
+from .._robot import make_robot
+
+LAWS = ("viscous", "hysteretic", "fractional")
+ALPHAS = (0.25, 0.5, 0.75)
+
+
+@dataclasses.dataclass(frozen=True)
+class Spring:
+    """One elastic coordinate: ``kind`` joint | orth | link, at joint/link index ``where``,
+    ``axis`` 0/1 for virtual pairs, damping ``law`` (``alpha`` for fractional)."""
+
+    kind: str
+    where: int
+    axis: int = 0
+    law: str = "viscous"
+    alpha: float = 0.5
+    frac: float = 0.5  # link hinges: position along the link (0 root, 1 tip)
+
+
+def _perp(a):
+    a = np.asarray(a, float) / np.linalg.norm(a)
+    e = np.eye(3)[np.argmin(np.abs(a))]
+    u1 = np.cross(a, e)
+    u1 /= np.linalg.norm(u1)
+    return u1, np.cross(a, u1)
+
+
+def augment(robot, springs, payload: bool = False):
+    """The robot with the virtual joints of ``springs`` inserted (zero-inertia links), and the
+    index of each spring's coordinate in it. Returns ``(robot_aug, coord_index (S,), model_index (n,))``."""
+    n = robot.nq
+    R = np.asarray(robot.placement_R)
+    P = np.asarray(robot.placement_p)
+    ax = np.asarray(robot.axis)
+    inert = np.asarray(robot.inertia)
+    joints = []  # dicts in build order
+    for i in range(n):
+        joints.append(dict(name=robot.joint_names[i], link=robot.link_names[i],
+                           parent=None if robot.parents[i] < 0 else robot.link_names[robot.parents[i]],
+                           R=R[i].copy(), p=P[i].copy(), axis=ax[i].copy(), type=robot.joint_types[i],
+                           inertia=inert[i].copy(), lower=float(robot.lower[i]), upper=float(robot.upper[i])))
+    frames = [dict(name=robot.frame_names[k], parent=None if robot.frame_parents[k] < 0 else robot.link_names[robot.frame_parents[k]],
+                   R=np.asarray(robot.frame_R[k]).copy(), p=np.asarray(robot.frame_p[k]).copy()) for k in range(len(robot.frame_names))]
+
+    def find(name):
+        return next(k for k, j in enumerate(joints) if j["link"] == name)
+
+    virtual = {}
+    for s in springs:
+        if s.kind == "orth" and (("orth", s.where) not in virtual):
+            j = find(robot.link_names[s.where])
+            J = joints[j]
+            u1, u2 = _perp(J["axis"])
+            v1 = dict(name=f"{J['name']}_orth_a", link=f"{J['link']}_orth_a", parent=J["parent"], R=J["R"], p=J["p"],
+                      axis=u1, type="revolute", inertia=np.zeros(10),
+                      lower=-np.inf, upper=np.inf)
+            v2 = dict(name=f"{J['name']}_orth_b", link=f"{J['link']}_orth_b", parent=v1["link"], R=np.eye(3), p=np.zeros(3),
+                      axis=u2, type="revolute", inertia=np.zeros(10), lower=-np.inf, upper=np.inf)
+            J["parent"], J["R"], J["p"] = v2["link"], np.eye(3), np.zeros(3)
+            joints[j:j] = [v1, v2]
+            virtual[("orth", s.where)] = (v1["name"], v2["name"])
+        if s.kind == "link" and (("link", s.where) not in virtual):
+            link = robot.link_names[s.where]
+            j = find(link)
+            kids = [k for k, jj in enumerate(joints) if jj["parent"] == link]
+            kf = [f for f in frames if f["parent"] == link]
+            ends = [joints[k]["p"] for k in kids] + [f["p"] for f in kf]
+            L = max(ends, key=np.linalg.norm) if ends else np.array([0.0, 0.0, 0.1])
+            if np.linalg.norm(L) < 1e-9:
+                L = np.array([0.0, 0.0, 0.1])
+            u1, u2 = _perp(L)
+            mid = s.frac * L
+            v1 = dict(name=f"{link}_bend_a", link=f"{link}_bend_a", parent=link, R=np.eye(3), p=mid, axis=u1,
+                      type="revolute", inertia=np.zeros(10), lower=-np.inf, upper=np.inf)
+            v2 = dict(name=f"{link}_bend_b", link=f"{link}_bend_b", parent=v1["link"], R=np.eye(3), p=np.zeros(3),
+                      axis=u2, type="revolute", inertia=np.zeros(10), lower=-np.inf, upper=np.inf)
+            for k in kids:
+                joints[k]["parent"], joints[k]["p"] = v2["link"], joints[k]["p"] - mid
+            for f in kf:
+                f["parent"], f["p"] = v2["link"], f["p"] - mid
+            joints[j + 1:j + 1] = [v1, v2]
+            virtual[("link", s.where)] = (v1["name"], v2["name"])
+    if payload:
+        pass  # handled by the caller through the last link's inertia (linear in the mass)
+    names = [j["link"] for j in joints]
+    aug = make_robot(
+        joint_names=[j["name"] for j in joints], link_names=names,
+        parents=[-1 if j["parent"] is None else names.index(j["parent"]) for j in joints],
+        joint_types=[j["type"] for j in joints], placement_R=np.stack([j["R"] for j in joints]),
+        placement_p=np.stack([j["p"] for j in joints]), axis=np.stack([j["axis"] for j in joints]),
+        inertia=np.stack([j["inertia"] for j in joints]), gravity=np.asarray(robot.gravity),
+        lower=np.array([j["lower"] for j in joints]), upper=np.array([j["upper"] for j in joints]),
+        frame_names=[f["name"] for f in frames],
+        frame_parents=[-1 if f["parent"] is None else names.index(f["parent"]) for f in frames],
+        frame_R=np.stack([f["R"] for f in frames]) if frames else None,
+        frame_p=np.stack([f["p"] for f in frames]) if frames else None, base_name=robot.base_name,
+    )
+    jn = list(aug.joint_names)
+    coord = []
+    for s in springs:
+        if s.kind == "joint":
+            coord.append(jn.index(robot.joint_names[s.where]))
+        else:
+            coord.append(jn.index(virtual[(s.kind, s.where)][s.axis]))
+    model_index = [jn.index(nm) for nm in robot.joint_names]
+    return aug, np.array(coord, dtype=int), np.array(model_index, dtype=int)
+
+
+def _point_mass(p):
+    x, y, z = p
+    # [m, mc, I about the body origin] of a unit point mass (Pinocchio's order)
+    return np.array([1.0, x, y, z, y * y + z * z, -x * y, x * x + z * z, -x * z, -y * z, x * x + y * y])
+
+
+@dataclasses.dataclass
+class PostureMats:
+    M: np.ndarray
+    Kg: np.ndarray
+    J: np.ndarray
+    dM: np.ndarray | None
+    dKg: np.ndarray | None
+
+
+@dataclasses.dataclass(frozen=True)
+class LinearStructure:
+    """Elastic coordinates and their laws, plus an optional tool payload."""
+
+    springs: tuple
+    payload: bool = False
+
+    def n_params(self) -> int:
+        return 2 * len(self.springs) + int(self.payload)
+
+
+class LinearModel:
+    """Evaluates FRFs and modes of a :class:`LinearStructure` at postures, parameters in log form:
+    ``[log k_s, log c_s (or eta_s) for each spring, log m_payload]``."""
+
+    def __init__(self, robot, structure: LinearStructure, tool_frame):
+        self.robot, self.structure, self.tool = robot, structure, tool_frame
+        self.aug, self.coord, self.model_index = augment(robot, structure.springs)
+        self._cache = {}
+
+    def mats(self, q0) -> PostureMats:
+        key = tuple(np.round(np.asarray(q0, float), 12))
+        if key in self._cache:
+            return self._cache[key]
+        qa = np.zeros(self.aug.nq)
+        qa[self.model_index] = q0
+        qa = jnp.asarray(qa)
+        c = self.coord
+        tool = self.tool if self.tool is not None else self.aug.link_names[-1]
+
+        def at(rob):
+            M = np.asarray(crba(rob, qa))[np.ix_(c, c)]
+            Kg = np.asarray(gravity_stiffness(rob, qa))[np.ix_(c, c)]
+            return M, Kg
+
+        M, Kg = at(self.aug)
+        J = np.asarray(jacobian(self.aug, qa, tool, "local_world_aligned"))[:3][:, c]
+        dM = dKg = None
+        if self.structure.payload:
+            body, k = self.aug.frame_index(tool)
+            p = np.zeros(3) if k < 0 else np.asarray(self.aug.frame_p[k])
+            inert = np.asarray(self.aug.inertia).copy()
+            inert[body] += _point_mass(p)
+            M1, K1 = at(self.aug.replace(inertia=inert))
+            dM, dKg = M1 - M, K1 - Kg
+        out = PostureMats(M, Kg, J, dM, dKg)
+        self._cache[key] = out
+        return out
+
+    def _split(self, x):
+        S = len(self.structure.springs)
+        k = np.exp(x[:S])
+        c = np.exp(x[S:2 * S])
+        m = np.exp(x[2 * S]) if self.structure.payload else 0.0
+        return k, c, m
+
+    def stiffness(self, x, P: PostureMats, omega):
+        """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,)."""
+        k, c, m = self._split(x)
+        M = P.M + (m * P.dM if P.dM is not None else 0.0)
+        Kg = P.Kg + (m * P.dKg if P.dKg is not None else 0.0)
+        w = np.asarray(omega, float)[:, None]
+        d = np.empty((w.shape[0], len(k)), complex)
+        for i, s in enumerate(self.structure.springs):
+            if s.law == "viscous":
+                d[:, i] = k[i] + 1j * w[:, 0] * c[i]
+            elif s.law == "hysteretic":
+                d[:, i] = k[i] * (1 + 1j * c[i])
+            else:
+                d[:, i] = k[i] + c[i] * (1j * w[:, 0]) ** s.alpha
+        D = Kg[None] - w[:, :, None] ** 2 * M[None] + d[:, :, None] * np.eye(len(k))[None]
+        return D, M
+
+    def frf(self, x, q0, freq_hz):
+        """Tool receptance (F, 3, 3) [m/N]."""
+        P = self.mats(q0)
+        if len(self.structure.springs) == 0:
+            return np.zeros((len(freq_hz), 3, 3), complex)
+        D, _ = self.stiffness(x, P, 2 * np.pi * np.asarray(freq_hz))
+        G = np.linalg.solve(D, np.broadcast_to(P.J.T, D.shape[:1] + P.J.T.shape).astype(complex))
+        return P.J[None] @ G
+
+    def modes(self, x, q0):
+        """(f [Hz], zeta) of the elastic modes, sorted; light-damping approximation: shapes from
+        the real stiffness, ``w_r^2`` its Rayleigh quotient at ``w_r`` (iterated for frequency-
+        dependent laws), ``zeta_r = phi^T Im D(w_r) phi / (2 w_r^2 phi^T M phi)``."""
+        P = self.mats(q0)
+        S = len(self.structure.springs)
+        if S == 0:
+            return np.zeros(0), np.zeros(0)
+        frac = any(s.law == "fractional" for s in self.structure.springs)
+        w_ref = 2 * np.pi * 10.0
+        D, M = self.stiffness(x, P, np.array([w_ref]))
+        lam, V = _gen_eig(D[0].real + w_ref**2 * M, M)
+        w = np.sqrt(np.maximum(lam, 1e-12))
+        for _ in range(4 if frac else 1):
+            D, M = self.stiffness(x, P, w)
+            K = D.real + (w**2)[:, None, None] * M[None]
+            num = np.einsum("ir,rij,jr->r", V, K, V)
+            den = np.einsum("ir,ij,jr->r", V, M, V)
+            w = np.sqrt(np.maximum(num / den, 1e-12))
+        D, M = self.stiffness(x, P, w)
+        z = np.einsum("ir,rij,jr->r", V, D.imag, V) / (2 * w**2 * np.einsum("ir,ij,jr->r", V, M, V))
+        o = np.argsort(w)
+        return w[o] / (2 * np.pi), z[o]
+
+
+def _gen_eig(K, M):
+    L = np.linalg.cholesky(M + 1e-12 * np.trace(M) * np.eye(len(M)))
+    Li = np.linalg.inv(L)
+    A = Li @ K @ Li.T
+    lam, U = np.linalg.eigh(0.5 * (A + A.T))
+    return lam, Li.T @ U
+
+
+# --- data residuals ----------------------------------------------------------------------------
+def match_modes(f_model, f_meas):
+    """Assign measured modes to model modes by relative frequency distance (one-to-one where the
+    model has modes left; a measured mode beyond the model's count takes its nearest mode).
+
+    Returns ``(index (M,), relative error (M,))``."""
+    from scipy.optimize import linear_sum_assignment
+
+    M = len(f_meas)
+    if len(f_model) == 0:
+        return np.full(M, -1), np.ones(M)
+    cost = np.abs(f_model[None, :] - f_meas[:, None]) / f_meas[:, None]
+    rows, cols = linear_sum_assignment(cost)
+    idx = np.full(M, -1)
+    idx[rows] = cols
+    for i in range(M):
+        if idx[i] < 0:
+            idx[i] = int(np.argmin(cost[i]))
+    rel = (f_model[idx] - f_meas) / f_meas
+    return idx, rel
+
+
+DAMPING_WEIGHT = 0.1  # a 10 % damping-ratio misfit counts like a 1 % frequency misfit
+
+
+def modal_errors(lm: LinearModel, x, arr):
+    f, z = lm.modes(x, arr["q0"])
+    idx, ef = match_modes(f, arr["freq"])
+    zm = arr["zeta"]
+    ok = np.isfinite(zm)
+    ez = np.zeros_like(ef)
+    if len(f):
+        ez[ok] = (z[idx][ok] - zm[ok]) / np.maximum(zm[ok], 0.005)
+    return ef, ez, idx, f, z
+
+
+def frf_scale(H):
+    """Per-entry RMS magnitude (3, 3) of a measured FRF."""
+    return np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
+
+
+def frf_entries(H):
+    s = frf_scale(H)
+    return s > 1e-3 * s.max()
+
+
+def residual(lm: LinearModel, x, train) -> np.ndarray:
+    """Stacked residual of the training FRF and modal sets."""
+    out = []
+    for d in train:
+        a = d.arrays
+        if d.kind == "frf":
+            Hm = lm.frf(x, a["q0"], a["freq"])
+            s = frf_scale(a["H"])
+            ok = frf_entries(a["H"])
+            e = (Hm - a["H"])[:, ok] / s[ok] / np.sqrt(a["H"].shape[0] * ok.sum())
+            out += [e.real.ravel(), e.imag.ravel()]
+        elif d.kind == "modal":
+            ef, ez, *_ = modal_errors(lm, x, a)
+            out += [ef / np.sqrt(len(ef)), DAMPING_WEIGHT * ez / np.sqrt(len(ez))]
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def fit_linear(lm: LinearModel, x0, train, free=None, starts=()):
+    """Nonlinear least squares (log parameters) from ``x0`` and extra starting points ``starts``;
+    ``free`` masks the parameters to fit (the rest held)."""
+    x0 = np.asarray(x0, float)
+    free = np.ones_like(x0, bool) if free is None else np.asarray(free, bool)
+    best = None
+    for xs in (x0, *starts):
+        xs = np.asarray(xs, float)
+
+        def fun(u, xs=xs):
+            x = xs.copy()
+            x[free] = u
+            return residual(lm, x, train)
+
+        if not free.any():
+            r = fun(xs[free])
+            cand = (float(r @ r), xs)
+        else:
+            sol = so.least_squares(fun, xs[free], method="trf", x_scale=1.0, max_nfev=60 * (1 + free.sum()))
+            x = xs.copy()
+            x[free] = sol.x
+            cand = (2 * sol.cost, x)
+        if best is None or cand[0] < best[0]:
+            best = cand
+    return best[1], best[0]
