@@ -24,3 +24,16 @@ from ._excitation import (
     FourierTrajectory as FourierTrajectory,
     design_excitation as design_excitation,
 )
+from ._fit import (
+    AbstractData as AbstractData,
+    AbstractTransform as AbstractTransform,
+    Bounded as Bounded,
+    FitResult as FitResult,
+    Free as Free,
+    Identity as Identity,
+    Log as Log,
+    ParameterSpec as ParameterSpec,
+    fit as fit,
+    residual_vector as residual_vector,
+)
+from ._residuals import FRFData as FRFData, ModalData as ModalData, TorqueData as TorqueData, model_modes as model_modes

@@ -84,7 +84,7 @@ def physical_fit(
     prior=None,
     prior_weight: float = 1e-6,
     solver=None,
-    max_steps: int = 500,
+    max_steps: int = 200,
 ) -> PhysicalResult:
     """Physically consistent least squares: ``min |A theta - y|^2 + w^2 |theta - prior|^2`` with the
     first ``10 n_links`` entries of theta parametrised per body by log-Cholesky.

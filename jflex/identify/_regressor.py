@@ -93,8 +93,13 @@ class Regressor(eqx.Module):
 
         **Arguments:** ``q``, ``qd``, ``qdd`` (N, n).
         """
-        Y = jax.vmap(lambda a, b, c: self(robot, a, b, c))(jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
-        return Y.reshape(-1, Y.shape[-1])
+        return _stack(self, robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
+
+
+@eqx.filter_jit
+def _stack(reg, robot, q, qd, qdd):
+    Y = jax.vmap(lambda a, b, c: reg(robot, a, b, c))(q, qd, qdd)
+    return Y.reshape(-1, Y.shape[-1])
 
 
 def random_samples(robot: Robot, n_samples: int, seed: int = 0, scale: float = np.pi):

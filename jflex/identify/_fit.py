@@ -1,0 +1,410 @@
+"""Output-error and mixed fits with optimistix: which leaves of a :class:`jflex.Model` are free
+(:class:`Free`, :class:`ParameterSpec`), what they are compared with (data residuals in
+``_residuals.py``) and :func:`fit`, which drives any optimistix least-squares solver or minimiser
+step by step (progress, best-so-far kept on interrupt) and reports NRMSE per channel, the
+Gauss-Newton covariance and the singular values of the residual Jacobian.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .._errors import ParameterError, ShapeError
+
+
+# --- transforms: unconstrained u -> physical p ------------------------------------------------
+class AbstractTransform(eqx.Module):
+    """Map between an unconstrained optimisation variable ``u`` and a physical value ``p``."""
+
+    def forward(self, u):
+        raise NotImplementedError
+
+    def inverse(self, p):
+        raise NotImplementedError
+
+
+class Identity(AbstractTransform):
+    """``p = scale * u``: unconstrained, scaled so that ``u`` is of order one."""
+
+    scale: jnp.ndarray
+
+    def __init__(self, scale=1.0):
+        self.scale = jnp.asarray(scale, dtype=float)
+
+    def forward(self, u):
+        return self.scale * u
+
+    def inverse(self, p):
+        return p / self.scale
+
+
+class Log(AbstractTransform):
+    """``p = exp(u)``: strictly positive, relative steps (stiffness, damping, masses)."""
+
+    def forward(self, u):
+        return jnp.exp(u)
+
+    def inverse(self, p):
+        p = jnp.asarray(p)
+        return jnp.log(p)
+
+
+class Bounded(AbstractTransform):
+    """``p = lower + (upper - lower) sigmoid(u)``: strictly inside ``(lower, upper)`` (e.g. a
+    fractional order in (0, 1))."""
+
+    lower: jnp.ndarray
+    upper: jnp.ndarray
+
+    def __init__(self, lower, upper):
+        self.lower = jnp.asarray(lower, dtype=float)
+        self.upper = jnp.asarray(upper, dtype=float)
+
+    def forward(self, u):
+        return self.lower + (self.upper - self.lower) * jax.nn.sigmoid(u)
+
+    def inverse(self, p):
+        s = (jnp.asarray(p) - self.lower) / (self.upper - self.lower)
+        return jnp.log(s) - jnp.log1p(-s)
+
+
+class Free(eqx.Module):
+    """One free leaf (or part of one) of a model.
+
+    **Arguments:**
+
+    - ``name``: label used in reports, e.g. ``"K"``.
+    - ``where``: ``model -> array leaf``, as for ``eqx.tree_at`` (e.g.
+      ``lambda m: m.effects[0].stiffness``).
+    - ``index``: optional NumPy index into that leaf (``(0,)``, ``np.s_[1:3]``); default: all of it.
+    - ``transform``: :class:`Log` (positive), :class:`Bounded`, :class:`Identity` (default, scaled
+      by the start value's magnitude).
+    - ``prior``: optional ``(mean, std)`` in physical units, added as residuals ``(p - mean)/std``.
+    """
+
+    name: str = eqx.field(static=True)
+    where: Callable = eqx.field(static=True)
+    index: Any = eqx.field(static=True, default=None)
+    transform: AbstractTransform | None = None
+    prior: tuple | None = None
+
+    def get(self, model):
+        leaf = jnp.asarray(self.where(model))
+        return leaf if self.index is None else leaf[self.index]
+
+    def set(self, model, value):
+        def repl(leaf):
+            leaf = jnp.asarray(leaf)
+            if self.index is None:
+                return jnp.broadcast_to(value, leaf.shape).astype(leaf.dtype)
+            return leaf.at[self.index].set(value)
+
+        return eqx.tree_at(self.where, model, replace_fn=repl)
+
+
+class ParameterSpec(eqx.Module):
+    """The free parameters of a fit: an ordered tuple of :class:`Free`, with their transforms
+    resolved against a start model (``spec = ParameterSpec(frees).bind(model)``)."""
+
+    frees: tuple[Free, ...]
+    shapes: tuple = eqx.field(static=True, default=())
+
+    def __init__(self, frees: Sequence[Free], shapes=()):
+        self.frees = tuple(frees)
+        self.shapes = tuple(shapes)
+        names = [f.name for f in self.frees]
+        if len(set(names)) != len(names):
+            raise ParameterError(f"ParameterSpec: free parameter names must be unique, got {names}")
+
+    def bind(self, model) -> "ParameterSpec":
+        """Fix shapes and default transforms from the start ``model``; checks start values."""
+        frees, shapes = [], []
+        for f in self.frees:
+            try:
+                v = np.asarray(f.get(model), dtype=float)
+            except Exception as exc:
+                raise ParameterError(f"ParameterSpec: free parameter '{f.name}': cannot read it from the model ({exc})") from None
+            tr = f.transform
+            if tr is None:
+                tr = Identity(np.where(np.abs(v) > 0, np.abs(v), 1.0))
+            u = np.asarray(tr.inverse(jnp.asarray(v)))
+            if not np.isfinite(u).all():
+                raise ParameterError(
+                    f"ParameterSpec: start value of '{f.name}' = {v.tolist()} is outside its transform "
+                    f"{type(tr).__name__} (Log needs > 0, Bounded needs lower < p < upper)"
+                )
+            frees.append(eqx.tree_at(lambda g: g.transform, f, tr, is_leaf=lambda x: x is None))
+            shapes.append(v.shape)
+        return ParameterSpec(frees, shapes)
+
+    @property
+    def size(self) -> int:
+        return int(sum(int(np.prod(s)) for s in self.shapes))
+
+    def labels(self) -> tuple[str, ...]:
+        out = []
+        for f, s in zip(self.frees, self.shapes):
+            k = int(np.prod(s))
+            out += [f.name] if s == () else [f"{f.name}[{i}]" for i in range(k)]
+        return tuple(out)
+
+    def _split(self, vec):
+        out, k = [], 0
+        for s in self.shapes:
+            m = int(np.prod(s))
+            out.append(vec[k : k + m].reshape(s))
+            k += m
+        return out
+
+    def pack(self, model):
+        """Unconstrained vector u (size,) of the model's current values."""
+        return jnp.concatenate([jnp.ravel(f.transform.inverse(f.get(model))) for f in self.frees])
+
+    def physical(self, u):
+        """Physical values as one flat vector (size,)."""
+        return jnp.concatenate([jnp.ravel(f.transform.forward(x)) for f, x in zip(self.frees, self._split(u))])
+
+    def apply(self, model, u, *, physical: bool = False):
+        """The model with the free leaves set from ``u`` (or from physical values)."""
+        for f, x in zip(self.frees, self._split(u)):
+            model = f.set(model, x if physical else f.transform.forward(x))
+        return model
+
+    def values(self, u) -> dict:
+        """dict name -> physical value."""
+        return {f.name: np.asarray(f.transform.forward(x)) for f, x in zip(self.frees, self._split(u))}
+
+    def prior_residuals(self, u):
+        parts = []
+        for f, x in zip(self.frees, self._split(u)):
+            if f.prior is not None:
+                mean, std = f.prior
+                parts.append(jnp.ravel((f.transform.forward(x) - jnp.asarray(mean)) / jnp.asarray(std)))
+        return jnp.concatenate(parts) if parts else jnp.zeros(0)
+
+
+# --- residuals --------------------------------------------------------------------------------
+class AbstractData(eqx.Module):
+    """Measured data of one kind and how the model predicts it.
+
+    ``residuals(model)`` returns a dict channel -> real residual vector, already weighted and
+    normalised so that its sum of squares is ``weight^2 * NRMSE^2`` of that channel (channels
+    of different units weigh alike); ``nrmse(model)`` returns dict channel -> NRMSE [-].
+    """
+
+    def residuals(self, model) -> dict:
+        raise NotImplementedError
+
+    def nrmse(self, model) -> dict:
+        raise NotImplementedError
+
+
+# --- the fit ------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class FitResult:
+    """Outcome of :func:`fit`.
+
+    - ``model``: the fitted model (best parameters seen).
+    - ``values``, ``std``: dict name -> physical value and its standard deviation.
+    - ``labels`` (static): one label per scalar parameter; ``covariance`` (p, p) Gauss-Newton
+      ``s^2 (J^T J)^+`` in physical units, ``s^2 = |r|^2 / (m - p)``.
+    - ``singular_values`` (p,): of the residual Jacobian w.r.t. relative parameter changes
+      (``d r / d ln p``), largest first; ``weak_directions``: for singular values below
+      ``1e-6`` of the largest (not identifiable from this data), the parameter combinations.
+    - ``nrmse``: dict channel -> NRMSE; ``cost`` ``0.5 |r|^2``; ``history`` of costs;
+      ``steps``; ``result``: solver message; ``interrupted``; ``seconds``.
+    """
+
+    model: Any
+    u: jnp.ndarray
+    values: dict
+    std: dict
+    covariance: np.ndarray
+    singular_values: np.ndarray
+    nrmse: dict
+    cost: float
+    history: list
+    steps: int
+    seconds: float
+    labels: tuple
+    weak_directions: list
+    result: str
+    interrupted: bool
+
+    def summary(self) -> str:
+        lines = [f"fit: {self.steps} steps, cost {self.cost:.6g}, {self.result}" + (" (interrupted)" if self.interrupted else "")]
+        for k, v in self.values.items():
+            s = self.std[k]
+            lines.append(f"  {k} = {np.array2string(np.asarray(v), precision=6)} +/- {np.array2string(np.asarray(s), precision=3)}")
+        lines.append("  NRMSE: " + ", ".join(f"{k} {v:.4g}" for k, v in self.nrmse.items()))
+        lines.append("  singular values (d r / d ln p): " + np.array2string(self.singular_values, precision=3))
+        for w in self.weak_directions:
+            lines.append(f"  not identifiable: {w}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-friendly report (values, std, NRMSE, singular values, weak directions)."""
+        return {
+            "values": {k: np.asarray(v).tolist() for k, v in self.values.items()},
+            "std": {k: np.asarray(v).tolist() for k, v in self.std.items()},
+            "nrmse": dict(self.nrmse),
+            "singular_values": np.asarray(self.singular_values).tolist(),
+            "weak_directions": self.weak_directions,
+            "cost": self.cost,
+            "steps": self.steps,
+            "seconds": self.seconds,
+            "result": self.result,
+            "interrupted": self.interrupted,
+        }
+
+
+def _as_list(data):
+    if isinstance(data, AbstractData):
+        return [data]
+    return list(data)
+
+
+def residual_vector(model, data) -> jnp.ndarray:
+    """All weighted residuals of ``data`` (one or a sequence of :class:`AbstractData`) as one vector."""
+    parts = []
+    for d in _as_list(data):
+        parts += [jnp.ravel(v) for v in d.residuals(model).values()]
+    return jnp.concatenate(parts)
+
+
+def fit(
+    model,
+    spec: ParameterSpec,
+    data,
+    solver=None,
+    *,
+    max_steps: int = 100,
+    progress: bool | int = True,
+    callback: Callable | None = None,
+    weak_tol: float = 1e-6,
+) -> FitResult:
+    """Fit the free parameters ``spec`` of ``model`` to ``data`` with an optimistix solver.
+
+    **Arguments:**
+
+    - ``model``: the start :class:`jflex.Model` (also supplies every fixed parameter).
+    - ``spec``: :class:`ParameterSpec` (bound here to ``model``).
+    - ``data``: one :class:`AbstractData` or a sequence (e.g. torque + modal + FRF): one weighted fit.
+    - ``solver``: an optimistix least-squares solver (default ``LevenbergMarquardt(rtol=1e-8,
+      atol=1e-8)``) or minimiser (``optx.BFGS``; the cost is then ``0.5 |r|^2``). Jacobians are
+      exact (forward/reverse-mode AD), never finite differences.
+    - ``max_steps``; ``progress``: print every step (or every ``progress`` steps) to stderr;
+      ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
+
+    Ctrl-C stops the loop: the best parameters seen are kept and ``interrupted`` is set.
+
+    **Returns:** :class:`FitResult`.
+    """
+    spec = spec.bind(model)
+    data = _as_list(data)
+    solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
+    u0 = spec.pack(model)
+
+    def resid(u, args):
+        m = spec.apply(model, u)
+        return jnp.concatenate([residual_vector(m, data), spec.prior_residuals(u)])
+
+    is_min = isinstance(solver, optx.AbstractMinimiser)
+    fn = (lambda u, a: (0.5 * jnp.sum(resid(u, a) ** 2), None)) if is_min else (lambda u, a: (resid(u, a), None))
+    tags = frozenset()
+    f_struct, aux_struct = jax.eval_shape(lambda: fn(u0, None))
+    state = eqx.filter_jit(lambda u: solver.init(fn, u, None, {}, f_struct, aux_struct, tags))(u0)
+
+    @eqx.filter_jit
+    def step(u, state):
+        u2, state2, _ = solver.step(fn, u, None, {}, state, tags)
+        done, res = solver.terminate(fn, u2, None, {}, state2, tags)
+        r = resid(u2, None)
+        return u2, state2, done, res, 0.5 * jnp.sum(r**2)
+
+    cost0 = float(eqx.filter_jit(lambda u: 0.5 * jnp.sum(resid(u, None) ** 2))(u0))
+    if not np.isfinite(cost0):
+        raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
+    best_u, best_cost, history = u0, cost0, [cost0]
+    u, k, interrupted, message = u0, 0, False, "max_steps reached"
+    every = int(progress) if progress and not isinstance(progress, bool) else (1 if progress else 0)
+    t_start = time.perf_counter()
+    try:
+        for k in range(1, max_steps + 1):
+            u, state, done, res, cost = step(u, state)
+            cost = float(cost)
+            history.append(cost)
+            if np.isfinite(cost) and cost < best_cost:
+                best_u, best_cost = u, cost
+            if every and (k % every == 0 or bool(done)):
+                print(f"  fit step {k:4d}  cost {cost:.6e}  best {best_cost:.6e}  {time.perf_counter() - t_start:.1f} s", file=sys.stderr)
+            if callback is not None:
+                callback(k, best_cost, spec.values(best_u))
+            if bool(done):
+                message = "converged" if res == optx.RESULTS.successful else str(res)
+                break
+    except KeyboardInterrupt:
+        interrupted, message = True, "interrupted"
+    seconds = time.perf_counter() - t_start
+    return _report(model, spec, data, best_u, best_cost, history, k, seconds, message, interrupted, weak_tol)
+
+
+def _report(model, spec, data, u, cost, history, steps, seconds, message, interrupted, weak_tol):
+    p = spec.physical(u)
+    fitted = spec.apply(model, u)
+
+    def r_of_p(pp):
+        m = spec.apply(model, pp, physical=True)
+        return residual_vector(m, data)
+
+    @eqx.filter_jit
+    def jac_and_nrmse(pp):
+        m = spec.apply(model, pp, physical=True)
+        out = {}
+        for d in data:
+            out.update(d.nrmse(m))
+        return jax.jacfwd(r_of_p)(pp), r_of_p(pp), out
+
+    J, r, nrmse = jac_and_nrmse(p)
+    J, r = np.asarray(J), np.asarray(r)
+    nrmse = {k: float(v) for k, v in nrmse.items()}
+    m_, n_ = J.shape
+    s2 = float(r @ r) / max(m_ - n_, 1)
+    # Parameters and the prior are folded into the information matrix so that a prior counts.
+    info = J.T @ J
+    pr = []
+    for f, s in zip(spec.frees, spec.shapes):
+        k = int(np.prod(s))
+        pr += list(np.broadcast_to(np.asarray(f.prior[1], float), s).ravel() ** -2.0) if f.prior is not None else [0.0] * k
+    info = info + np.diag(pr) * s2 if any(pr) else info
+    cov = s2 * np.linalg.pinv(info)
+    std_flat = np.sqrt(np.clip(np.diag(cov), 0, None))
+    scale = np.where(np.abs(np.asarray(p)) > 0, np.abs(np.asarray(p)), 1.0)
+    Js = J * scale
+    _, sv, Vt = np.linalg.svd(Js, full_matrices=False)
+    labels = spec.labels()
+    weak = []
+    for i, s in enumerate(sv):
+        if s <= weak_tol * sv[0]:
+            v = Vt[i]
+            top = np.argsort(-np.abs(v))[:4]
+            weak.append({"singular_value": float(s), "combination": {labels[j]: float(v[j]) for j in top if abs(v[j]) > 1e-3}})
+            # pinv would report a zero variance along a direction the data cannot see at all
+            std_flat = np.where(np.abs(v) > 1e-3, np.inf, std_flat)
+    std_flat = np.asarray(std_flat, dtype=float)
+    std = {f.name: x for f, x in zip(spec.frees, [a.reshape(s) for a, s in zip(np.split(std_flat, np.cumsum([int(np.prod(s)) for s in spec.shapes])[:-1]), spec.shapes)])}
+    return FitResult(
+        model=fitted, u=u, values=spec.values(u), std=std, covariance=cov, singular_values=sv, nrmse=nrmse,
+        cost=float(cost), history=history, steps=int(steps), seconds=float(seconds), labels=labels,
+        weak_directions=weak, result=message, interrupted=interrupted,
+    )
