@@ -80,3 +80,16 @@ from .linear import (
     track_modes as track_modes,
 )
 from . import fem as fem
+from ._inputs import (  # time responses (issue 4)
+    AbstractInput as AbstractInput, Brake as Brake, Chirp as Chirp, Function as Function, Ramp as Ramp,
+    Sampled as Sampled, Step as Step, Zero as Zero,
+)
+from ._simulate import Response as Response, simulate as simulate, total_energy as total_energy
+from ._beam import (
+    Beam as Beam, beam_modal_matrices as beam_modal_matrices, beam_roots as beam_roots,
+    clamped_free_frequencies as clamped_free_frequencies, make_beam as make_beam,
+)
+from ._lagrangian import (
+    lagrangian_bias as lagrangian_bias, lagrangian_forward_dynamics as lagrangian_forward_dynamics,
+    lagrangian_mass_matrix as lagrangian_mass_matrix,
+)
