@@ -1,0 +1,181 @@
+"""Posture sweeps: jflex (jit + vmap through jflex.sweep) against a NumPy/SciPy loop, one process,
+same inputs. Not a test: prints a table with throughputs and ratios.
+
+1. Modal analysis of a 3-joint flexible-joint arm (motors held) over N postures: jflex
+   ``modal_analysis`` vs per posture Pinocchio CRBA + gravity derivatives and
+   ``scipy.linalg.eig(A, B)`` of seed 003 Eq. 4.13.
+2. Tool FRFs (3x3 receptance) over N postures x 512 frequencies: jflex ``frf`` (direct and modal)
+   vs per posture ``numpy.linalg.solve`` over the 512 frequencies and ``J G J^T``.
+
+    python benchmarks/bench_modal.py [--modal-n 100000] [--frf-n 10000] [--host-devices 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+p = argparse.ArgumentParser()
+p.add_argument("--modal-n", type=int, default=100_000)
+p.add_argument("--frf-n", type=int, default=10_000)
+p.add_argument("--n-freq", type=int, default=512)
+p.add_argument("--baseline-n", type=int, default=0, help="postures timed for the SciPy loop (0: all)")
+p.add_argument("--host-devices", type=int, default=1, help="CPU devices jflex.sweep shards over")
+p.add_argument("--chunk", type=int, default=8192)
+args = p.parse_args()
+if args.host_devices > 1:
+    os.environ["XLA_FLAGS"] = os.environ.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={args.host_devices}"
+
+import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
+import scipy.linalg as sla  # noqa: E402
+
+import jax  # noqa: E402
+import jflex  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# Staubli TX200 kinematics; plausible link inertias; Table 4.3 joint K and C; rotors r = 196.
+inertias = [
+    {"mass": 120.0, "com": [0.0, -0.1, -0.2], "inertia": [20.0, 0.0, 18.0, 0.0, 0.0, 12.0]},
+    {"mass": 150.0, "com": [0.45, 0.0, 0.05], "inertia": [6.0, 0.0, 40.0, 0.0, 0.0, 42.0]},
+    {"mass": 90.0, "com": [0.5, 0.0, 0.0], "inertia": [3.0, 0.0, 25.0, 0.0, 0.0, 26.0]},
+]
+base = jflex.load_robot(os.path.join(ROOT, "configs", "robots", "staubli_tx200.yaml"))
+robot = jflex.from_dh(
+    [[0, 0, 0.642, 0], [np.pi / 2, 0.25, 0, 0], [0, 0.95, 0, 0]], tool=[0, 0.994, 0, 0], inertias=inertias
+)
+assert np.allclose(robot.placement_p, base.placement_p)
+K = np.array([1.95e6, 5.63e6, 1.13e6])
+C = np.array([3.3e3, 0.3e3, 1.0e3])
+r, Im3 = 196.0, 0.0094
+Im = np.array([Im3, Im3, Im3])
+model = jflex.Model(robot, [jflex.effects.FlexibleJoints(K, C, rotor_inertia=Im, gear_ratio=[r] * 3)])
+
+rng = np.random.default_rng(0)
+lo, hi = np.radians([-150, -28, -130]), np.radians([150, 150, 8])
+
+
+# ---- the NumPy/SciPy reference: Pinocchio for M and dG/dq, SciPy for the eigenproblem --------
+pm = pin.Model()
+pm.gravity = pin.Motion(np.asarray(robot.gravity), np.zeros(3))
+jid = 0
+for i in range(3):
+    jid = pm.addJoint(jid, pin.JointModelRevoluteUnaligned(np.asarray(robot.axis[i])),
+                      pin.SE3(np.asarray(robot.placement_R[i]), np.asarray(robot.placement_p[i])), f"j{i}")
+    pm.appendBodyToJoint(jid, pin.Inertia.FromDynamicParameters(np.asarray(robot.inertia[i])), pin.SE3.Identity())
+tool_id = pm.addFrame(pin.Frame("tool", jid, 0, pin.SE3(np.asarray(robot.frame_R[-1]), np.asarray(robot.frame_p[-1])),
+                                pin.FrameType.OP_FRAME))
+pd = pm.createData()
+M_rotor = np.zeros((3, 3))
+M_rotor[1, 1] = Im3  # rotor 3 rides on link 2 and turns with q2 (the carried term of the effect)
+
+
+def scipy_matrices(q):
+    M0 = pin.crba(pm, pd, q).copy()
+    M0 = np.triu(M0) + np.triu(M0, 1).T + M_rotor
+    dG = pin.computeGeneralizedGravityDerivatives(pm, pd, q)
+    return M0, np.diag(K) + dG, np.diag(C)
+
+
+def scipy_modal(q):
+    M0, K0, C0 = scipy_matrices(q)
+    Z = np.zeros((3, 3))
+    A = np.block([[C0, M0], [M0, Z]])
+    B = np.block([[K0, Z], [Z, -M0]])
+    lam, V = sla.eig(-B, A)  # (lambda A + B) v = 0
+    keep = np.argsort(-lam.imag)[:3]
+    lam, V = lam[keep], V[:3, keep]
+    o = np.argsort(np.abs(lam))
+    return np.abs(lam[o]) / (2 * np.pi), -lam[o].real / np.abs(lam[o]), V[:, o]
+
+
+def scipy_frf(q, w):
+    M0, K0, C0 = scipy_matrices(q)
+    D = K0[None] - w[:, None, None] ** 2 * M0[None] + 1j * w[:, None, None] * C0[None]
+    G = np.linalg.solve(D, np.broadcast_to(np.eye(3), D.shape))
+    pin.computeJointJacobians(pm, pd, q)
+    pin.updateFramePlacements(pm, pd)
+    J = pin.getFrameJacobian(pm, pd, tool_id, pin.LOCAL_WORLD_ALIGNED)[:3]
+    return J @ G @ J.T
+
+
+def timed(f):
+    t = time.perf_counter()
+    out = f()
+    jax.block_until_ready(out)
+    return out, time.perf_counter() - t
+
+
+rows = []
+print(f"jax {jax.__version__}, devices {jax.devices()}")
+
+# ---- 1. modal analysis ----------------------------------------------------------------------
+N = args.modal_n
+Q = rng.uniform(lo, hi, (N, 3))
+fn = lambda q: jflex.modal_analysis(model, q, hold="actuated")
+warm, t_c = timed(lambda: jflex.sweep(fn, Q[: args.chunk], chunk_size=args.chunk, progress=False))
+# sweep compiles per call; time the steady state by a second call of the same chunk size
+t0 = time.perf_counter()
+vfn = jax.jit(jax.vmap(fn))
+_ = jax.block_until_ready(vfn(Q[: args.chunk]).frequency)
+t_compile = time.perf_counter() - t0
+res = {}
+
+
+def jflex_modal():
+    out = [vfn(Q[s : s + args.chunk]) for s in range(0, N - N % args.chunk, args.chunk)]
+    return [o.frequency for o in out]
+
+
+_, t_j = timed(jflex_modal)
+n_j = N - N % args.chunk
+_, t_sweep = timed(lambda: jflex.sweep(fn, Q, chunk_size=args.chunk, progress=True, label="jflex.sweep modal"))
+nb = N if args.baseline_n == 0 else min(N, args.baseline_n)
+t0 = time.perf_counter()
+ref = [scipy_modal(q) for q in Q[:nb]]
+t_s = time.perf_counter() - t0
+f_ref = np.array([x[0] for x in ref])
+f_j = np.asarray(vfn(Q[:nb]).frequency) if nb <= args.chunk else np.asarray(warm.frequency)[: min(nb, args.chunk)]
+m = min(len(f_j), nb)
+err = np.max(np.abs(f_j[:m] - f_ref[:m]) / f_ref[:m])
+rows.append(("modal, 3-joint flexible, per posture", N, t_s / nb, t_j / n_j, t_sweep / N, err, t_compile))
+
+# ---- 2. tool FRFs ----------------------------------------------------------------------------
+N2, nf = args.frf_n, args.n_freq
+Q2 = rng.uniform(lo, hi, (N2, 3))
+w = 2 * np.pi * np.linspace(0.5, 60.0, nf)
+ch2 = max(1, min(args.chunk, 2_000_000 // nf // 9))
+for method in ("modal", "direct"):
+    g = jax.jit(jax.vmap(lambda q: jflex.frf(model, q, w, hold="actuated", frame="tool", method=method)))
+    t0 = time.perf_counter()
+    jax.block_until_ready(g(Q2[:ch2]))
+    t_compile = time.perf_counter() - t0
+
+    def run():
+        out = None
+        for s in range(0, N2 - N2 % ch2, ch2):
+            out = g(Q2[s : s + ch2])
+            out = np.asarray(out)  # to host, like a sweep keeping its results
+        return out
+
+    _, t_j = timed(run)
+    n_j = N2 - N2 % ch2
+    nb2 = N2 if args.baseline_n == 0 else min(N2, args.baseline_n)
+    if method == "modal":
+        t0 = time.perf_counter()
+        Gref = [scipy_frf(q, w) for q in Q2[:nb2]]
+        t_s2 = time.perf_counter() - t0
+    Gj = np.asarray(g(Q2[:ch2]))
+    m = min(ch2, nb2)
+    err = max(np.max(np.abs(Gj[i] - Gref[i])) / np.max(np.abs(Gref[i])) for i in range(m))
+    rows.append((f"tool FRF 3x3 x {nf} freqs ({method}), per posture", N2, t_s2 / nb2, t_j / n_j, float("nan"), err, t_compile))
+
+print()
+print(f"{'case':48s} {'N':>7s} {'SciPy us':>10s} {'jflex us':>10s} {'ratio':>7s} {'sweep us':>9s} {'max rel diff':>12s} {'compile s':>9s}")
+for name, n, ts, tj, tsw, e, tc in rows:
+    print(f"{name:48s} {n:7d} {1e6 * ts:10.2f} {1e6 * tj:10.2f} {ts / tj:7.1f} {1e6 * tsw:9.2f} {e:12.2e} {tc:9.1f}")
+print("\nratio = SciPy-loop time / jflex time per posture (jit+vmap in chunks, compile excluded);"
+      " 'sweep us' is jflex.sweep end to end (progress, host copies, one compile included).")
