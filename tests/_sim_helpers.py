@@ -17,26 +17,6 @@ class Spring(AbstractEffect):
         return 0.5 * self.k * x[self.i] ** 2
 
 
-class MotorSpring(AbstractEffect):
-    """Test-only flexible joint (issue 3's effect had not landed): a motor coordinate ``theta``
-    with inertia ``J`` coupled to joint 0 by a spring ``K``; the actuator drives ``theta``."""
-
-    K: jnp.ndarray
-    J: jnp.ndarray
-
-    def coord_names(self, robot):
-        return ("theta",)
-
-    def kinetic_energy(self, robot, slots, x, xd):
-        return 0.5 * self.J * xd[slots.coords][0] ** 2
-
-    def potential_energy(self, robot, slots, x):
-        return 0.5 * self.K * (x[0] - x[slots.coords][0]) ** 2
-
-    def actuation(self, robot, slots, B):
-        return jnp.zeros_like(B).at[slots.coords.start, 0].set(1.0)
-
-
 def slider(mass=1.0, gravity=(0.0, 0.0, 0.0)):
     """One prismatic joint along x carrying a point mass [kg]."""
     return jflex.make_robot(

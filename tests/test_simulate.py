@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jflex
-from _sim_helpers import oscillator, MotorSpring, rotor
+from _sim_helpers import oscillator, rotor
 
 TOL = 1e-6  # closed-form agreement at rtol 1e-10
 
@@ -143,14 +143,15 @@ def test_vmap_batch_of_responses():
 
 
 def test_flexible_joint_tends_to_rigid_joint():
-    """Test-local spring-coupled motor (issue 3's effect had not landed when this was written)."""
+    """jflex.effects.FlexibleJoints (issue 3, reduced model): as K grows the joint angle tends to
+    the rigid joint carrying the motor inertia, tau t^2 / (2 (I + J))."""
     J, I, tau = 0.05, 0.1, 0.2
     ts = np.linspace(0, 0.5, 11)
     rigid = jflex.simulate(jflex.Model(rotor(I)), ts, inputs=jflex.Step([tau], 0.0), rtol=1e-10, atol=1e-12, outputs=("j1",))
     # rigid joint with the motor's inertia added: closed form tau t^2 / (2 (I + J))
     errs = []
     for K in (1e2, 1e4, 1e6):
-        mdl = jflex.Model(rotor(I), [MotorSpring(jnp.asarray(K), jnp.asarray(J))])
+        mdl = jflex.Model(rotor(I), [jflex.effects.FlexibleJoints([K], rotor_inertia=[J], joints=[0], coupling=False)])
         r = jflex.simulate(mdl, ts, inputs=jflex.Step([tau], 0.0), rtol=1e-10, atol=1e-12, outputs=("j1",),
                            solver=diffrax.Kvaerno5(), max_steps=200_000)
         errs.append(np.max(np.abs(np.asarray(r["j1"]) - tau * ts**2 / (2 * (I + J)))))
