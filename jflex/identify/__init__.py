@@ -37,3 +37,13 @@ from ._fit import (
     residual_vector as residual_vector,
 )
 from ._residuals import FRFData as FRFData, ModalData as ModalData, TorqueData as TorqueData, model_modes as model_modes
+from ._ema import (
+    FRFEstimate as FRFEstimate,
+    LSCFResult as LSCFResult,
+    frf_estimate as frf_estimate,
+    lscf as lscf,
+    modal_residues as modal_residues,
+    peak_picking as peak_picking,
+    stable_modes as stable_modes,
+)
+from ._uff import UFF58 as UFF58, read_uff58 as read_uff58, write_uff58 as write_uff58
