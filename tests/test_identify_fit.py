@@ -159,3 +159,24 @@ def test_interrupt_keeps_best_and_minimiser_path():
     assert res.interrupted and res.steps == 2 and res.cost == min(res.history)
     res = idf.fit(start, spec, data, optx.BFGS(rtol=1e-10, atol=1e-10), progress=False, max_steps=200)
     assert np.allclose(res.values["Fv"], 0.4, rtol=1e-5) and np.allclose(res.values["mcx"], 0.6, rtol=1e-5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("segments", [1, 4])
+def test_time_response_fit_unknown_initial_state_and_multiple_shooting(segments):
+    robot = _pendulum()
+    fr = lambda fv: jflex.effects.JointFriction(robot.joint_names, viscous=[fv], coulomb=[0.0], stribeck_velocity=1e-6)
+    true = jflex.Model(robot, [fr(0.3)])
+    ts = np.linspace(0, 4, 160, endpoint=False)
+    r = jflex.simulate(true, ts, x0=jnp.array([-1.0]), outputs=("joint1", "x", "xd"))
+    y = np.asarray(r["joint1"])
+    guess = {"x": np.asarray(r["x"]) * 1.1, "xd": np.asarray(r["xd"]) * 0.9} if segments > 1 else None
+    data = idf.TimeData(ts, {"joint1": y}, x0=[-0.6], segments=segments, guess=guess)  # initial angle unknown (-40 %)
+    spec = idf.ParameterSpec([idf.Free("Fv", lambda m: m.effects[0].viscous, transform=idf.Log())]
+                             + data.initial_state_frees(0, segments="first" if segments == 1 else "all", velocities=segments > 1))
+    res = idf.fit(jflex.Model(robot, [fr(0.15)]), spec, data, progress=False, max_steps=60)  # Fv -50 %
+    assert np.allclose(res.values["Fv"], 0.3, rtol=1e-6)
+    assert np.allclose(res.values["time.x0"][0], -1.0, rtol=1e-6)
+    if segments > 1:  # the shooting nodes land on the true trajectory
+        assert np.allclose(res.values["time.x0"].ravel(), np.asarray(r["x"])[::40, 0], atol=1e-5)
+    assert res.nrmse["time:joint1"] < 1e-5

@@ -36,7 +36,13 @@ from ._fit import (
     fit as fit,
     residual_vector as residual_vector,
 )
-from ._residuals import FRFData as FRFData, ModalData as ModalData, TorqueData as TorqueData, model_modes as model_modes
+from ._residuals import (
+    FRFData as FRFData,
+    ModalData as ModalData,
+    TimeData as TimeData,
+    TorqueData as TorqueData,
+    model_modes as model_modes,
+)
 from ._ema import (
     FRFEstimate as FRFEstimate,
     LSCFResult as LSCFResult,

@@ -90,6 +90,8 @@ class Free(eqx.Module):
     - ``transform``: :class:`Log` (positive), :class:`Bounded`, :class:`Identity` (default, scaled
       by the start value's magnitude).
     - ``prior``: optional ``(mean, std)`` in physical units, added as residuals ``(p - mean)/std``.
+    - ``on``: ``"model"`` (default) or ``"data"``: then ``where`` receives the tuple of data
+      objects of the fit, e.g. ``lambda d: d[0].x0`` for an unknown initial state.
     """
 
     name: str = eqx.field(static=True)
@@ -97,19 +99,37 @@ class Free(eqx.Module):
     index: Any = eqx.field(static=True, default=None)
     transform: AbstractTransform | None = None
     prior: tuple | None = None
+    on: str = eqx.field(static=True, default="model")
 
-    def get(self, model):
-        leaf = jnp.asarray(self.where(model))
+    def __check_init__(self):
+        if self.on not in ("model", "data"):
+            raise ParameterError(f"Free '{self.name}': on must be 'model' or 'data', got '{self.on}'")
+
+    def _where(self, pair):
+        return self.where(pair[0] if self.on == "model" else pair[1])
+
+    def get(self, target):
+        leaf = jnp.asarray(self._where(_pair(target)))
         return leaf if self.index is None else leaf[self.index]
 
-    def set(self, model, value):
+    def set(self, target, value):
         def repl(leaf):
             leaf = jnp.asarray(leaf)
             if self.index is None:
                 return jnp.broadcast_to(value, leaf.shape).astype(leaf.dtype)
             return leaf.at[self.index].set(value)
 
-        return eqx.tree_at(self.where, model, replace_fn=repl)
+        pair = eqx.tree_at(self._where, _pair(target), replace_fn=repl)
+        return pair if _is_pair(target) else pair[0]
+
+
+def _is_pair(obj):
+    return isinstance(obj, tuple) and len(obj) == 2 and isinstance(obj[1], tuple)
+
+
+def _pair(obj):
+    """``(model, data_tuple)`` from a model or a pair."""
+    return obj if _is_pair(obj) else (obj, ())
 
 
 class ParameterSpec(eqx.Module):
@@ -126,7 +146,7 @@ class ParameterSpec(eqx.Module):
         if len(set(names)) != len(names):
             raise ParameterError(f"ParameterSpec: free parameter names must be unique, got {names}")
 
-    def bind(self, model) -> "ParameterSpec":
+    def bind(self, model) -> "ParameterSpec":  # model: a Model or a (model, data tuple) pair
         """Fix shapes and default transforms from the start ``model``; checks start values."""
         frees, shapes = [], []
         for f in self.frees:
@@ -214,18 +234,21 @@ class AbstractData(eqx.Module):
 class FitResult:
     """Outcome of :func:`fit`.
 
-    - ``model``: the fitted model (best parameters seen).
+    - ``model``: the fitted model (best parameters seen); ``data``: the data objects with any
+      fitted data-side parameters (initial states).
     - ``values``, ``std``: dict name -> physical value and its standard deviation.
     - ``labels`` (static): one label per scalar parameter; ``covariance`` (p, p) Gauss-Newton
       ``s^2 (J^T J)^+`` in physical units, ``s^2 = |r|^2 / (m - p)``.
-    - ``singular_values`` (p,): of the residual Jacobian w.r.t. relative parameter changes
-      (``d r / d ln p``), largest first; ``weak_directions``: for singular values below
+    - ``singular_values`` (p,): of the residual Jacobian w.r.t. the optimisation variables
+      (``d r / d u``: relative changes for :class:`Log`, start-magnitude units for
+      :class:`Identity`), largest first; ``weak_directions``: for singular values below
       ``1e-6`` of the largest (not identifiable from this data), the parameter combinations.
     - ``nrmse``: dict channel -> NRMSE; ``cost`` ``0.5 |r|^2``; ``history`` of costs;
       ``steps``; ``result``: solver message; ``interrupted``; ``seconds``.
     """
 
     model: Any
+    data: tuple
     u: jnp.ndarray
     values: dict
     std: dict
@@ -247,7 +270,7 @@ class FitResult:
             s = self.std[k]
             lines.append(f"  {k} = {np.array2string(np.asarray(v), precision=6)} +/- {np.array2string(np.asarray(s), precision=3)}")
         lines.append("  NRMSE: " + ", ".join(f"{k} {v:.4g}" for k, v in self.nrmse.items()))
-        lines.append("  singular values (d r / d ln p): " + np.array2string(self.singular_values, precision=3))
+        lines.append("  singular values (d r / d u): " + np.array2string(self.singular_values, precision=3))
         for w in self.weak_directions:
             lines.append(f"  not identifiable: {w}")
         return "\n".join(lines)
@@ -310,14 +333,15 @@ def fit(
 
     **Returns:** :class:`FitResult`.
     """
-    spec = spec.bind(model)
-    data = _as_list(data)
+    data = tuple(_as_list(data))
+    pair = (model, data)
+    spec = spec.bind(pair)
     solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
-    u0 = spec.pack(model)
+    u0 = spec.pack(pair)
 
     def resid(u, args):
-        m = spec.apply(model, u)
-        return jnp.concatenate([residual_vector(m, data), spec.prior_residuals(u)])
+        m, d = spec.apply(pair, u)
+        return jnp.concatenate([residual_vector(m, d), spec.prior_residuals(u)])
 
     is_min = isinstance(solver, optx.AbstractMinimiser)
     fn = (lambda u, a: (0.5 * jnp.sum(resid(u, a) ** 2), None)) if is_min else (lambda u, a: (resid(u, a), None))
@@ -356,22 +380,22 @@ def fit(
     except KeyboardInterrupt:
         interrupted, message = True, "interrupted"
     seconds = time.perf_counter() - t_start
-    return _report(model, spec, data, best_u, best_cost, history, k, seconds, message, interrupted, weak_tol)
+    return _report(pair, spec, best_u, best_cost, history, k, seconds, message, interrupted, weak_tol)
 
 
-def _report(model, spec, data, u, cost, history, steps, seconds, message, interrupted, weak_tol):
+def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, weak_tol):
     p = spec.physical(u)
-    fitted = spec.apply(model, u)
+    fitted, fitted_data = spec.apply(pair, u)
 
     def r_of_p(pp):
-        m = spec.apply(model, pp, physical=True)
-        return residual_vector(m, data)
+        m, d = spec.apply(pair, pp, physical=True)
+        return residual_vector(m, d)
 
     @eqx.filter_jit
     def jac_and_nrmse(pp):
-        m = spec.apply(model, pp, physical=True)
+        m, dd = spec.apply(pair, pp, physical=True)
         out = {}
-        for d in data:
+        for d in dd:
             out.update(d.nrmse(m))
         return jax.jacfwd(r_of_p)(pp), r_of_p(pp), out
 
@@ -389,7 +413,9 @@ def _report(model, spec, data, u, cost, history, steps, seconds, message, interr
     info = info + np.diag(pr) * s2 if any(pr) else info
     cov = s2 * np.linalg.pinv(info)
     std_flat = np.sqrt(np.clip(np.diag(cov), 0, None))
-    scale = np.where(np.abs(np.asarray(p)) > 0, np.abs(np.asarray(p)), 1.0)
+    # Columns scaled by dp/du: the sensitivities to the optimisation variables, which are relative
+    # for Log, bounded-relative for Bounded and in units of the start magnitude for Identity.
+    scale = np.abs(np.asarray(jax.jacfwd(spec.physical)(u)).diagonal())
     Js = J * scale
     _, sv, Vt = np.linalg.svd(Js, full_matrices=False)
     labels = spec.labels()
@@ -404,7 +430,7 @@ def _report(model, spec, data, u, cost, history, steps, seconds, message, interr
     std_flat = np.asarray(std_flat, dtype=float)
     std = {f.name: x for f, x in zip(spec.frees, [a.reshape(s) for a, s in zip(np.split(std_flat, np.cumsum([int(np.prod(s)) for s in spec.shapes])[:-1]), spec.shapes)])}
     return FitResult(
-        model=fitted, u=u, values=spec.values(u), std=std, covariance=cov, singular_values=sv, nrmse=nrmse,
+        model=fitted, data=fitted_data, u=u, values=spec.values(u), std=std, covariance=cov, singular_values=sv, nrmse=nrmse,
         cost=float(cost), history=history, steps=int(steps), seconds=float(seconds), labels=labels,
         weak_directions=weak, result=message, interrupted=interrupted,
     )

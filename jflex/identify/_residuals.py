@@ -107,7 +107,8 @@ class ModalData(AbstractData):
     - ``postures`` (P, n) [rad]; ``frequency`` (P, m) [Hz]; ``damping`` (P, m) [-] (ratio).
     - ``shapes`` optional (P, s, m) (complex allowed), compared by MAC (residual ``1 - MAC``);
       over the coordinates of ``frame`` when given, else over the kept coordinates.
-    - ``mode_index``: (m,) static model-mode indices (default ``0..m-1``), or ``"mac"`` (default
+    - ``mode_index``: (m,) or per posture (P, m) static model-mode indices (default ``0..m-1``;
+      e.g. from :func:`jflex.track_modes` when modes swap order across postures), or ``"mac"`` (default
       when shapes are given): pair each measured mode with a model mode by the best MAC at each
       posture, which survives modes swapping order while the parameters move.
     - ``hold``, ``frame``: as in :func:`jflex.modal_analysis` (seed 003: ``hold="actuated"``).
@@ -152,7 +153,11 @@ class ModalData(AbstractData):
                 raise DataError(f"{source or 'ModalData'}: mode_index='mac' needs measured shapes; otherwise give model-mode indices")
             self.mode_index = "mac"
         else:
-            self.mode_index = tuple(int(i) for i in mode_index)
+            mi = np.asarray(mode_index, dtype=int)
+            mi = np.broadcast_to(mi, (p.shape[0], f.shape[1])) if mi.ndim == 1 else mi
+            if mi.shape != (p.shape[0], f.shape[1]):
+                raise DataError(f"{source or 'ModalData'}: mode_index: expected ({f.shape[1]},) or ({p.shape[0]}, {f.shape[1]}), got {mi.shape}")
+            self.mode_index = tuple(tuple(int(i) for i in row) for row in mi)
         self.hold = hold if isinstance(hold, str) else tuple(hold)
         self.frame = frame
         self.name = name
@@ -161,19 +166,20 @@ class ModalData(AbstractData):
         """(f (P, m) [Hz], zeta (P, m), shapes (P, s, m) or None) of the model."""
         m = self.frequency.shape[1]
 
-        def one(q, measured):
+        P = self.postures.shape[0]
+
+        def one(q, measured, idx):
             f, z, sh = model_modes(model, q, hold=self.hold, frame=self.frame)
             if self.mode_index == "mac":
                 S = jax.lax.stop_gradient(mac(measured, sh))  # (m, n_model)
                 nm = S.shape[1]
                 S = jnp.concatenate([S, jnp.zeros((nm - m, nm))]) if nm > m else S
                 idx = best_permutation(S)[:m]
-            else:
-                idx = jnp.array(self.mode_index)
             return f[idx], z[idx], sh[:, idx]
 
-        shapes = self.shapes if self.shapes is not None else jnp.zeros((self.postures.shape[0], 1, m))
-        return jax.vmap(one)(self.postures, shapes)
+        shapes = self.shapes if self.shapes is not None else jnp.zeros((P, 1, m))
+        idx = jnp.zeros((P, m), int) if self.mode_index == "mac" else jnp.array(self.mode_index)
+        return jax.vmap(one)(self.postures, shapes, idx)
 
     def _parts(self, model):
         f, z, sh = self.predict(model)
@@ -276,3 +282,141 @@ class FRFData(AbstractData):
         L = self._log_ratio(model)
         return {f"{self.name}:log_magnitude": jnp.sqrt(jnp.mean(jnp.real(L) ** 2)),
                 f"{self.name}:phase": jnp.sqrt(jnp.mean(jnp.imag(L) ** 2))}
+
+
+class TimeData(AbstractData):
+    """One experiment's measured time responses, compared with :func:`jflex.simulate`.
+
+    The record can be cut into ``segments`` for multiple shooting: segment k starts from its own
+    state ``(x0s[k], xd0s[k], z0s[k])`` and a continuity residual ties the end of segment k to the
+    start of segment k + 1. Free those start states with :meth:`initial_state_frees` (segment 0
+    only: unknown initial state; all: multiple shooting), otherwise they stay as given.
+
+    **Arguments:**
+
+    - ``ts`` (N,) [s], strictly increasing; ``outputs``: dict output name (any name
+      :func:`jflex.simulate` knows: ``"joint2"``, ``"beam.tip_deflection"``, ``"frame:tool"``)
+      -> measured (N, ...) values.
+    - ``x0``, ``xd0``, ``z0``: initial state of the experiment (nx,), (nx,), (nz,) (for
+      multiple shooting the later segments start from the states interpolated on ``guess``, a
+      dict ``{"x": (N, nx), "xd": (N, nx), "z": (N, nz)}``, or repeat the initial state).
+    - ``inputs``: a :class:`jflex.AbstractInput` (default zero); ``segments``; ``weights``: dict
+      output -> weight; ``continuity_weight``; ``simulate_kw``: passed to :func:`jflex.simulate`
+      (solver, rtol, atol, max_steps, adjoint; default adjoint ``diffrax.ForwardMode()`` since
+      Levenberg-Marquardt builds Jacobians column by column in forward mode).
+    """
+
+    ts: jnp.ndarray
+    measured: dict
+    x0s: jnp.ndarray
+    xd0s: jnp.ndarray
+    z0s: jnp.ndarray
+    inputs: object
+    weights: dict
+    continuity_weight: jnp.ndarray
+    segments: int = eqx.field(static=True)
+    simulate_kw: tuple = eqx.field(static=True)
+    name: str = eqx.field(static=True)
+
+    def __init__(self, ts, outputs: dict, x0, xd0=None, z0=None, *, inputs=None, segments: int = 1, guess=None,
+                 weights=None, continuity_weight=10.0, simulate_kw=None, name="time", source=None):
+        t = check_time(ts, "ts", source)
+        meas = {}
+        for k, v in outputs.items():
+            a = check_finite(v, k, source).astype(float)
+            if a.shape[0] != t.shape[0]:
+                raise DataError(f"{source or 'TimeData'}: field '{k}': has {a.shape[0]} samples but 'ts' has {t.shape[0]}")
+            meas[k] = jnp.asarray(a)
+        if not meas:
+            raise DataError(f"{source or 'TimeData'}: no measured outputs given")
+        S = int(segments)
+        if not 1 <= S <= t.shape[0] // 2:
+            raise DataError(f"{source or 'TimeData'}: segments must be between 1 and {t.shape[0] // 2}, got {segments}")
+        if t.shape[0] % S:
+            raise DataError(f"{source or 'TimeData'}: {t.shape[0]} samples do not split into {S} equal segments; trim the record")
+        x0 = np.asarray(x0, float)
+        xd0 = np.zeros_like(x0) if xd0 is None else np.asarray(xd0, float)
+        z0 = np.zeros(0) if z0 is None else np.asarray(z0, float)
+        L = t.shape[0] // S
+        starts = np.arange(S) * L
+        if guess is not None:
+            x0s = np.asarray(guess["x"], float)[starts]
+            xd0s = np.asarray(guess["xd"], float)[starts]
+            z0s = np.asarray(guess["z"], float)[starts] if "z" in guess else np.tile(z0, (S, 1))
+            x0s[0], xd0s[0], z0s[0] = x0, xd0, z0
+        else:
+            x0s, xd0s, z0s = np.tile(x0, (S, 1)), np.tile(xd0, (S, 1)), np.tile(z0, (S, 1))
+        self.ts, self.measured = jnp.asarray(t), meas
+        self.x0s, self.xd0s, self.z0s = jnp.asarray(x0s), jnp.asarray(xd0s), jnp.asarray(z0s)
+        self.inputs = inputs
+        self.weights = {k: jnp.asarray((weights or {}).get(k, 1.0), dtype=float) for k in meas}
+        self.continuity_weight = jnp.asarray(continuity_weight, dtype=float)
+        self.segments = S
+        self.simulate_kw = tuple(sorted((simulate_kw or {}).items()))
+        self.name = name
+
+    def initial_state_frees(self, index: int, *, segments="first", velocities: bool = True, coords=None):
+        """:class:`Free` entries for the start states of this data object, ``index`` being its
+        position in the data sequence passed to :func:`fit`. ``segments``: ``"first"`` (unknown
+        initial state) or ``"all"`` (multiple shooting); ``coords``: optional index list of the
+        coordinates to free (default all)."""
+        from ._fit import Free
+
+        rows = slice(0, 1) if segments == "first" else slice(None)
+        cols = slice(None) if coords is None else np.asarray(coords)
+        ix = (rows, cols) if coords is None else np.ix_(np.arange(self.segments)[rows], np.asarray(coords))
+        out = [Free(f"{self.name}.x0", lambda d: d[index].x0s, index=ix, on="data")]
+        if velocities:
+            out.append(Free(f"{self.name}.xd0", lambda d: d[index].xd0s, index=ix, on="data"))
+        return out
+
+    def _simulate(self, model):
+        import diffrax
+
+        from .._simulate import simulate
+
+        kw = dict(self.simulate_kw)
+        kw.setdefault("adjoint", diffrax.ForwardMode())
+        kw.setdefault("throw", False)
+        S = self.segments
+        L = self.ts.shape[0] // S
+        names = tuple(self.measured)
+        want = names + (("x", "xd", "z") if S > 1 else ())
+        tseg = self.ts.reshape(S, L)
+        # Each segment integrates to the next segment's first sample, for the continuity residual.
+        t_next = jnp.concatenate([tseg[1:, 0], self.ts[-1:] + (self.ts[-1] - self.ts[-2])])
+        grid = jnp.concatenate([tseg, t_next[:, None]], axis=1)
+
+        def one(tt, x0, xd0, z0):
+            r = simulate(model, tt, x0, xd0, z0 if z0.shape[0] else None, inputs=self.inputs, outputs=want, **kw)
+            return r.outputs
+
+        out = jax.vmap(one)(grid, self.x0s, self.xd0s, self.z0s)
+        pred = {k: out[k][:, :L].reshape((S * L,) + out[k].shape[2:]) for k in names}
+        cont = None
+        if S > 1:
+            cont = (out["x"][:-1, L] - self.x0s[1:], out["xd"][:-1, L] - self.xd0s[1:],
+                    out["z"][:-1, L] - self.z0s[1:] if self.z0s.shape[1] else jnp.zeros((S - 1, 0)))
+        return pred, cont
+
+    def predict(self, model):
+        """Simulated outputs, dict name -> (N, ...)."""
+        return self._simulate(model)[0]
+
+    def residuals(self, model):
+        pred, cont = self._simulate(model)
+        out = {}
+        for k, meas in self.measured.items():
+            scale = jnp.maximum(jnp.std(meas, axis=0), 1e-300) * jnp.sqrt(meas.shape[0])
+            out[f"{self.name}:{k}"] = self.weights[k] * ((pred[k] - meas) / scale).ravel()
+        if cont is not None:
+            # States scaled by their spread over the shooting nodes, so that every coordinate counts.
+            for lab, c, ref in zip(("x", "xd", "z"), cont, (self.x0s, self.xd0s, self.z0s)):
+                if c.shape[1]:
+                    sc = jnp.maximum(jnp.std(ref, axis=0), 1e-9) * jnp.sqrt(c.shape[0])
+                    out[f"{self.name}:continuity_{lab}"] = self.continuity_weight * (c / sc).ravel()
+        return out
+
+    def nrmse(self, model):
+        pred = self.predict(model)
+        return {f"{self.name}:{k}": jnp.mean(_nrmse(pred[k], meas)) for k, meas in self.measured.items()}
