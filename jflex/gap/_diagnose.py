@@ -209,17 +209,23 @@ class Problem:
         P = lm2.mats(self._ref_posture())
         targets = self._unmatched_freqs(lm, x) or [self._ref_freq()]
         starts = []
-        for ft in targets[:2]:
-            for scale in (0.5, 1.0, 2.0):
+        for ft in targets[:1]:
+            for scale in (0.6, 1.6):
                 nk, nc = [], []
                 for s in range(len(new)):
                     ii = S + s
                     meff = max(P.M[ii, ii] - P.M[ii, :S] @ np.linalg.solve(P.M[:S, :S], P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
-                    k = scale * (2 * np.pi * ft) ** 2 * meff * (1.0 + 0.3 * s)
+                    k = scale * (2 * np.pi * ft) ** 2 * meff * (1.0 + 0.5 * s)
                     nk.append(np.log(k))
                     nc.append(np.log(2 * 0.02 * np.sqrt(k * meff)))
                 starts.append(np.concatenate([ks, nk, cs, nc, pay]))
-        xf, _ = L.fit_linear(lm2, starts[0], self.ftrain, starts=starts[1:])
+        # warm start: first the new spring(s) alone, the nominal ones held; then everything
+        Sn = len(sp)
+        free = np.zeros(len(starts[0]), bool)
+        free[S:Sn] = True
+        free[Sn + S:2 * Sn] = True
+        x1, _ = L.fit_linear(lm2, starts[0], self.ftrain, free=free, starts=starts[1:])
+        xf, _ = L.fit_linear(lm2, x1, self.ftrain)
         return lm2, xf
 
     def _ref_posture(self):

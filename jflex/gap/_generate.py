@@ -192,7 +192,7 @@ def frf_truth(robot, tool, springs, K, laws, q0, freq, payload=None):
     S = len(springs)
     out = np.empty((len(w), 3, 3), complex)
     for i, wi in enumerate(w):
-        D = Kg + K - wi**2 * M
+        D = (Kg + K - wi**2 * M).astype(complex)
         for s, (law, v, al) in enumerate(laws):
             if law == "viscous":
                 D[s, s] += 1j * wi * v
@@ -355,7 +355,9 @@ def frf_case(folder, robot_name, truths, seed, noise=0.01, n_post=3):
     for i, q0 in enumerate(postures):
         H = frf_truth(robot, "tool", springs + extra_springs, K, all_laws, q0, FRF_FREQ, payload)
         scale = np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
-        reps = H[None] + noise * scale[None, None] * (rng.normal(size=(3,) + H.shape) + 1j * rng.normal(size=(3,) + H.shape)) / np.sqrt(2)
+        # noise relative to the local response (coherence-limited) plus a small floor
+        amp = noise * (np.abs(H) + 0.02 * scale[None])
+        reps = H[None] + amp[None] * (rng.normal(size=(3,) + H.shape) + 1j * rng.normal(size=(3,) + H.shape)) / np.sqrt(2)
         dsets.append(("frf", f"frf_p{i}", "train" if i < n_post - 1 else "validation",
                       dict(q0=q0, freq=FRF_FREQ, H=reps.mean(axis=0), H_repeats=reps)))
     nominal = [dict(effect="joint_flexibility", joint=[robot.joint_names[j] for j in nominal_joints],
