@@ -272,8 +272,14 @@ def torque_case(folder, robot_name, truths, seed, noise=0.01, nominal_friction=F
     fric = None
     nominal = []
     if nominal_friction:
-        fric = (scale / qd.std(axis=0) * rng.uniform(0.05, 0.1, n), scale * rng.uniform(0.05, 0.1, n))
-        nominal = [dict(effect="viscous_friction", joint="all"), dict(effect="coulomb_friction", joint="all")]
+        # the nominal model already has friction at every joint, except a law the truth itself adds
+        laws = {"viscous_friction", "coulomb_friction"} - set(truths)
+        if "stribeck_friction" in truths:
+            laws.discard("coulomb_friction")
+        Fv = scale / qd.std(axis=0) * rng.uniform(0.05, 0.1, n) * ("viscous_friction" in laws)
+        Fc = scale * rng.uniform(0.05, 0.1, n) * ("coulomb_friction" in laws)
+        fric = (Fv, Fc)
+        nominal = [dict(effect=e, joint="all") for e in sorted(laws)]
     dsets = []
     for i in range(n_train + n_val):
         tt, q, qd, qdd = fourier_trajectory(n, rng)
