@@ -111,6 +111,7 @@ def test_malformed_case_errors(tmp_path, edit, err, words):
 def test_malformed_npz_errors(tmp_path):
     folder = _good_case(tmp_path)
     z = dict(np.load(folder / "traj0.npz"))
+    good = dict(z)
     np.savez(folder / "traj0.npz", **{k: v for k, v in z.items() if k != "tau"})
     with pytest.raises(jflex.DataError, match=r"traj0\.npz: field 'tau'"):
         load_case(folder)
@@ -118,6 +119,7 @@ def test_malformed_npz_errors(tmp_path):
     np.savez(folder / "traj0.npz", **z)
     with pytest.raises(jflex.DataError, match=r"traj0\.npz: field 'q'"):
         load_case(folder)
+    np.savez(folder / "traj0.npz", **good)
     z = dict(np.load(folder / "traj1.npz"))
     z["tau"][3, 1] = np.nan
     np.savez(folder / "traj1.npz", **z)

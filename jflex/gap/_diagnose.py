@@ -365,7 +365,7 @@ def _ic_delta(ev_new, ev_old, p_new):
 
 
 NESTED = {"stribeck_friction": "coulomb_friction"}  # complex -> the simpler effect it contains
-PARSIMONY = 3.0  # [%] a nested simpler effect within this shrink of the richer one ranks first
+PARSIMONY = 5.0  # [%] a nested simpler effect within this shrink of the richer one ranks first
 
 
 def _rank(entries) -> list[int]:
@@ -619,7 +619,13 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     while significant and len(selected) < max_effects and pool:
         _, _, exc_cur = _combine(ev_cur, floor)
         best = None
-        for c in pool[: max(prune, 6)]:
+        if selected:
+            # the residual changed: rank the signatures again so effects masked by the first
+            # (larger) one get their turn
+            sig_k = signatures(pb, state, cands)
+            tc_k = sorted([c for c in cands if c in sig_k], key=lambda c: -sig_k[c])
+            pool = tc_k[:prune] + [c for c in cands if c not in sig_k]
+        for c in pool:
             if any(c.effect == s.effect and c.joint == s.joint for s in state.added):
                 continue
             if not selected:
@@ -647,7 +653,6 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
         selected.append(_entry(pb, c, ev, ev0, floor, score))
         selected[-1]["step_shrink"] = float(step_shrink)
         state, ev_cur = st, ev
-        pool = [p for p in pool if p != c]
         g, _, e = _combine(ev, floor)
         steps.append(dict(added=c.label(pb.names), gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()}))
         say(f"selected {c.label(pb.names)}: gap {g:.2f} %")

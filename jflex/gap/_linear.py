@@ -285,6 +285,7 @@ def match_modes(f_model, f_meas):
     if len(f_model) == 0:
         return np.full(M, -1), np.ones(M)
     cost = np.abs(f_model[None, :] - f_meas[:, None]) / f_meas[:, None]
+    cost = np.where(np.isfinite(cost), cost, 1e6)
     rows, cols = linear_sum_assignment(cost)
     idx = np.full(M, -1)
     idx[rows] = cols
@@ -347,7 +348,7 @@ PEAK_WEIGHT = 1.0  # FRF training sets also enter through their picked peaks (sm
 FIT_STRIDE = 3  # every 3rd frequency of a measured FRF enters the fit (peaks stay resolved)
 
 
-def residual(lm: LinearModel, x, train) -> np.ndarray:
+def residual(lm: LinearModel, x, train, peaks_only: bool = False) -> np.ndarray:
     """Stacked fitting residual of the training FRF and modal sets: FRFs as the complex error
     normalised by each entry's RMS (the measure the gap is judged by; a log-ratio misfit was
     tried and preferred sharp misplaced peaks), modal tables as relative frequency errors plus
@@ -363,6 +364,8 @@ def residual(lm: LinearModel, x, train) -> np.ndarray:
             ok = frf_entries(a["H"])
             Hm, H = Hm[:, ok], H[:, ok]
             e = (Hm - H) / s[ok] / np.sqrt(H.size)
+            if peaks_only:
+                e = e[:0]
             if "_peaks" not in a:
                 a["_peaks"] = frf_peaks(a["freq"], a["H"])
             pf, pz = a["_peaks"]
@@ -388,26 +391,27 @@ def fit_linear(lm: LinearModel, x0, train, free=None, starts=()):
     x0 = np.asarray(x0, float)
     free = np.ones_like(x0, bool) if free is None else np.asarray(free, bool)
     best = None
+    phases = (True, False) if any(d.kind == "frf" for d in train) else (False,)
     for xs in (x0, *starts):
         xs = np.asarray(xs, float)
+        # two phases: the picked peaks alone (smooth in log k), then the whole complex FRF
+        for peaks_only in phases:
+            def fun(u, xs=xs, po=peaks_only):
+                x = xs.copy()
+                x[free] = u
+                return residual(lm, x, train, po)
 
-        def fun(u, xs=xs):
-            x = xs.copy()
-            x[free] = u
-            return residual(lm, x, train)
-
-        if not free.any():
-            r = fun(xs[free])
-            cand = (float(r @ r), xs)
-        else:
+            if not free.any():
+                break
             # log parameters stay within a factor e^3 (stiffness) / e^4 (damping) of the start: the
             # FRF misfit has spurious minima at vanishing or huge damping
             u0 = np.clip(xs[free], -50, 50)
             width = np.where(np.arange(len(xs))[free] % (2 * len(lm.structure.springs) or 1) < len(lm.structure.springs), 3.0, 4.0)
             sol = so.least_squares(fun, u0, method="trf", bounds=(u0 - width, u0 + width), max_nfev=30 * (1 + free.sum()))
-            x = xs.copy()
-            x[free] = sol.x
-            cand = (2 * sol.cost, x)
+            xs = xs.copy()
+            xs[free] = sol.x
+        r = residual(lm, xs, train)
+        cand = (float(r @ r), xs)
         if best is None or cand[0] < best[0]:
             best = cand
     return best[1], best[0]

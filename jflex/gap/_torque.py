@@ -22,7 +22,7 @@ import scipy.optimize as so
 
 from .._dynamics import regressor, rnea
 
-EPS_SIGN = 0.02  # [rad/s] width of the smooth sign used by every Coulomb-like term
+EPS_SIGN = 0.005  # [rad/s] width of the smooth sign used by every Coulomb-like term (dry friction is sharp)
 STRIBECK_VS = (0.03, 0.06, 0.12, 0.25, 0.5)  # [rad/s] grid of Stribeck velocities
 DELAYS = tuple(np.round(np.arange(0.001, 0.0605, 0.001), 4))  # [s] grid of sensor delays
 
@@ -44,6 +44,7 @@ class TorqueSet:
     q_extra: np.ndarray
     extra_joints: tuple
     robot: object = None
+    cache: dict = dataclasses.field(default_factory=dict)  # backlash torques per (joint, b)
 
 
 @jax.jit
@@ -92,22 +93,19 @@ def torque_set(robot, ds) -> TorqueSet:
                      np.maximum(a["tau"].std(axis=0), 1e-9), Ypay, np.asarray(J), a["q_extra"], ds.extra_joints, robot)
 
 
-_BACKLASH_CACHE: dict = {}
-
-
 def backlash_torque(s: TorqueSet, j: int, b: float) -> np.ndarray:
     """Rigid torque change (N, n) when the link of joint ``j`` follows the measured (motor-side)
     angle through a play of half-width ``b``; engagement smoothed by a zero-phase first-order
     filter (8 ms)."""
-    key = (id(s), j, b)
-    if key not in _BACKLASH_CACHE:
+    key = ("backlash", j, b)
+    if key not in s.cache:
         ql, qdl, qddl = s.q.copy(), s.qd.copy(), s.qdd.copy()
         ql[:, j] = zero_phase_lowpass(play(s.q[:, j], b), s.t, 0.008)
         qdl[:, j] = np.gradient(ql[:, j], s.t)
         qddl[:, j] = np.gradient(qdl[:, j], s.t)
         F = np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qddl)))
-        _BACKLASH_CACHE[key] = F - s.F0
-    return _BACKLASH_CACHE[key]
+        s.cache[key] = F - s.F0
+    return s.cache[key]
 
 
 def held_sign(v, tol):
