@@ -7,7 +7,28 @@ Everything runs in float64 unless ``JFLEX_X64=0`` is set before import.
 import importlib.metadata as _md
 import os as _os
 
+# XLA:CPU's new fusion emitters recompute shared subexpressions of long elementwise graphs
+# (the rigid-body kernels, MuJoCo MJX) and run them up to 1000x slower (see DESIGN.md and
+# benchmarks/bench_dynamics.py). The legacy emitters do not. The flag only takes effect if set
+# before JAX starts its CPU backend; JFLEX_XLA_FLAGS=0 leaves XLA_FLAGS untouched.
+if _os.environ.get("JFLEX_XLA_FLAGS", "1") != "0" and "xla_cpu_use_fusion_emitters" not in _os.environ.get("XLA_FLAGS", ""):
+    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
+
 import jax as _jax
+
+try:  # warn when JAX's CPU backend started before the flag could apply (private API)
+    from jax._src import xla_bridge as _xb
+except Exception:
+    _xb = None
+if _xb is not None and getattr(_xb, "_backends", None) and _os.environ.get("JFLEX_XLA_FLAGS", "1") != "0":
+    import warnings as _warnings
+
+    _warnings.warn(
+        "jflex was imported after JAX initialised its backend, so XLA_FLAGS="
+        "--xla_cpu_use_fusion_emitters=false could not take effect; rigid-body kernels may run far "
+        "slower on CPU. Import jflex first, or set that flag yourself.",
+        stacklevel=2,
+    )
 
 if _os.environ.get("JFLEX_X64", "1") != "0":
     _jax.config.update("jax_enable_x64", True)
@@ -65,7 +86,7 @@ from ._model import (
     model_inverse_dynamics as model_inverse_dynamics,
     state_rate as state_rate,
 )
-from ._sweep import sweep as sweep
+from ._sweep import batched as batched, sweep as sweep
 from ._config import (
     available_robots as available_robots,
     load_robot as load_robot,

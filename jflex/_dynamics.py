@@ -1,5 +1,6 @@
 """Rigid-body algorithms on one state (no batch dimension): kinematics, Jacobians, RNEA, CRBA,
-ABA, the joint-torque regressor and energies. All reuse the traversal in ``_tree``.
+ABA, the joint-torque regressor and energies. All reuse the traversal in ``_tree`` and the
+scalarised algebra in ``_scalar``.
 
 Conventions follow Pinocchio: ``rnea(robot, q, qd, qdd)`` returns joint torques, ``crba`` the
 joint-space mass matrix, ``regressor`` the matrix Y with ``rnea = Y @ robot.inertia.ravel()``.
@@ -10,9 +11,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from . import _scalar as s
 from . import _spatial as sp
 from ._robot import Robot, check_q
-from ._tree import backward_pass, forward_pass, joint_motion, support
+from ._tree import accumulate, consts, host, motion, support, walk
 
 _REFERENCES = ("local", "world", "local_world_aligned")
 
@@ -24,6 +26,10 @@ def _checked(robot, **arrays):
     return [None if a is None else jnp.asarray(a) for a in arrays.values()]
 
 
+def _dtype():
+    return jnp.result_type(float)
+
+
 def forward_kinematics(robot: Robot, q):
     """World placements of every body frame.
 
@@ -32,25 +38,28 @@ def forward_kinematics(robot: Robot, q):
     **Returns:** (n, 4, 4) homogeneous transforms of the body frames in the base frame.
     """
     (q,) = _checked(robot, q=q)
-    ls = forward_pass(robot, q)
-    return jnp.stack([sp.homogeneous(R, p) for R, p in zip(ls.oR, ls.op)])
+    ls = walk(robot, consts(robot, inertia=False), q, world=True)
+    dt = _dtype()
+    return jnp.stack([sp.homogeneous(R.array().astype(dt), p.array().astype(dt)) for R, p in zip(ls.oR, ls.op)])
 
 
 def _frame_pose(robot: Robot, ls, frame):
+    """(body, R, p) of a frame in the base, scalarised."""
     body, k = robot.frame_index(frame)
     if k < 0:
         return body, ls.oR[body], ls.op[body]
+    fR, fp = s.M33.of(host(robot.frame_R)[k]), s.V3.of(host(robot.frame_p)[k])
     if body < 0:
-        return body, robot.frame_R[k], robot.frame_p[k]
-    R, p = sp.compose(ls.oR[body], ls.op[body], robot.frame_R[k], robot.frame_p[k])
-    return body, R, p
+        return body, fR, fp
+    return body, ls.oR[body].mm(fR), ls.op[body] + ls.oR[body].mv(fp)
 
 
 def frame_placement(robot: Robot, q, frame):
     """World placement (4, 4) of a named frame (link, joint or extra frame such as a tool)."""
     (q,) = _checked(robot, q=q)
-    _, R, p = _frame_pose(robot, forward_pass(robot, q), frame)
-    return sp.homogeneous(R, p)
+    _, R, p = _frame_pose(robot, walk(robot, consts(robot, inertia=False), q, world=True), frame)
+    dt = _dtype()
+    return sp.homogeneous(R.array().astype(dt), p.array().astype(dt))
 
 
 def jacobian(robot: Robot, q, frame, reference: str = "local_world_aligned"):
@@ -69,39 +78,41 @@ def jacobian(robot: Robot, q, frame, reference: str = "local_world_aligned"):
     if reference not in _REFERENCES:
         raise ValueError(f"jacobian: reference must be one of {_REFERENCES}, got '{reference}'")
     (q,) = _checked(robot, q=q)
-    ls = forward_pass(robot, q)
+    c = consts(robot, inertia=False)
+    ls = walk(robot, c, q, world=True)
     body, oR_f, op_f = _frame_pose(robot, ls, frame)
-    cols = []
     anc = set(support(robot, body)) if body >= 0 else set()
+    cols = []
     for j in range(robot.nq):
         if j not in anc:
-            cols.append(jnp.zeros(6, dtype=op_f.dtype))
+            cols.append([0.0] * 6)
             continue
-        sw, sv = joint_motion(robot, j)
-        zw, zv = ls.oR[j] @ sw, ls.oR[j] @ sv
+        sw, sv = motion(robot, c, j)
+        zw, zv = ls.oR[j].mv(sw), ls.oR[j].mv(sv)
         if reference == "world":
-            lin = zv + jnp.cross(ls.op[j], zw)
+            lin = zv + s.cross(ls.op[j], zw)
         else:
-            lin = zv + jnp.cross(zw, op_f - ls.op[j])
+            lin = zv + s.cross(zw, op_f - ls.op[j])
         ang = zw
         if reference == "local":
-            lin, ang = oR_f.T @ lin, oR_f.T @ ang
-        cols.append(jnp.concatenate([lin, ang]))
-    return jnp.stack(cols, axis=1)
+            lin, ang = oR_f.tv(lin), oR_f.tv(ang)
+        cols.append(list(lin) + list(ang))
+    dt = _dtype()
+    return jnp.stack([s.stack(col, dt) for col in cols], axis=1)
 
 
-def _body_forces(robot, ls, f_ext):
+def _body_forces(robot, c, ls, f_ext):
     ns, fs = [], []
     for i in range(robot.nq):
-        pi = robot.inertia[i]
-        hw, hv = sp.inertia_apply(pi, ls.aw[i], ls.av[i])
-        mw, mv = sp.inertia_apply(pi, ls.w[i], ls.v[i])
-        cw, cv = sp.cross_force(ls.w[i], ls.v[i], mw, mv)
+        I = c.inertia[i]
+        hw, hv = I.apply(ls.aw[i], ls.av[i])
+        mw, mv = I.apply(ls.w[i], ls.v[i])
+        cw, cv = s.cross_force(ls.w[i], ls.v[i], mw, mv)
         n_i, f_i = hw + cw, hv + cv
         if f_ext is not None:
             # f_ext rows are [force (3), moment (3)] in body axes, like Pinocchio's fext.
-            f_i = f_i - f_ext[i, :3]
-            n_i = n_i - f_ext[i, 3:]
+            f_i = f_i - s.V3(f_ext[i, 0], f_ext[i, 1], f_ext[i, 2])
+            n_i = n_i - s.V3(f_ext[i, 3], f_ext[i, 4], f_ext[i, 5])
         ns.append(n_i)
         fs.append(f_i)
     return ns, fs
@@ -116,13 +127,14 @@ def rnea(robot: Robot, q, qd, qdd, f_ext=None):
     **Returns:** (n,) joint torques/forces ``tau = M(q) qdd + C(q, qd) qd + g(q) - J^T f_ext``.
     """
     q, qd, qdd = _checked(robot, q=q, qd=qd, qdd=qdd)
-    ls = forward_pass(robot, q, qd, qdd)
-    ns, fs = backward_pass(robot, ls, *_body_forces(robot, ls, f_ext))
+    c = consts(robot)
+    ls = walk(robot, c, q, qd, qdd)
+    ns, fs = accumulate(robot, ls, *_body_forces(robot, c, ls, None if f_ext is None else jnp.asarray(f_ext)))
     tau = []
     for i in range(robot.nq):
-        sw, sv = joint_motion(robot, i)
-        tau.append(sp.dot(sw, ns[i]) + sp.dot(sv, fs[i]))
-    return jnp.stack(tau)
+        sw, sv = motion(robot, c, i)
+        tau.append(s.add(s.dot(sw, ns[i]), s.dot(sv, fs[i])))
+    return s.stack(tau, _dtype())
 
 
 def nonlinear_effects(robot: Robot, q, qd):
@@ -140,74 +152,120 @@ def crba(robot: Robot, q):
     """Joint-space mass matrix by the composite rigid-body algorithm, shape (n, n), symmetric."""
     (q,) = _checked(robot, q=q)
     n = robot.nq
-    ls = forward_pass(robot, q)
+    c = consts(robot)
+    ls = walk(robot, c, q)
     # composite inertias kept as 10 parameters: the child-to-parent step is linear in them
-    Ic = [robot.inertia[i] for i in range(n)]
+    Ic = list(c.inertia)
     for i in reversed(range(n)):
         par = robot.parents[i]
         if par >= 0:
-            Ic[par] = Ic[par] + sp.transform_params_fast(Ic[i], ls.R[i], ls.p[i])
-    M = [[None] * n for _ in range(n)]
-    zero = jnp.zeros((), dtype=robot.inertia.dtype)
+            Ic[par] = Ic[par] + Ic[i].to_parent(ls.R[i], ls.p[i])
+    M = [[0.0] * n for _ in range(n)]
     for i in range(n):
-        sw, sv = joint_motion(robot, i)
-        Fn, Ff = sp.inertia_apply(Ic[i], sw, sv)
-        M[i][i] = sp.dot(sw, Fn) + sp.dot(sv, Ff)
+        sw, sv = motion(robot, c, i)
+        Fn, Ff = Ic[i].apply(sw, sv)
+        M[i][i] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))
         j = i
         while robot.parents[j] >= 0:
-            Fn, Ff = sp.force_to_parent(ls.R[j], ls.p[j], Fn, Ff)
+            Fn, Ff = s.force_to_parent(ls.R[j], ls.p[j], Fn, Ff)
             j = robot.parents[j]
-            sw, sv = joint_motion(robot, j)
-            M[i][j] = M[j][i] = sp.dot(sw, Fn) + sp.dot(sv, Ff)
-    return jnp.stack([jnp.stack([zero if e is None else e for e in row]) for row in M])
+            sw, sv = motion(robot, c, j)
+            M[i][j] = M[j][i] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))
+    dt = _dtype()
+    return jnp.stack([s.stack(row, dt) for row in M])
+
+
+# ---- ABA: 6-vectors and 6x6 matrices as lists of scalars ((w, v) ordering) ----------------
+
+
+def _v6(w, v):
+    return list(w) + list(v)
+
+
+def _mv6(A, x):
+    return [s.sum_(*(s.mul(a, b) for a, b in zip(row, x))) for row in A]
+
+
+def _mtv6(A, x):
+    return [s.sum_(*(s.mul(A[k][j], x[k]) for k in range(6))) for j in range(6)]
+
+
+def _mm6(A, B):
+    return [[s.sum_(*(s.mul(A[i][k], B[k][j]) for k in range(6))) for j in range(6)] for i in range(6)]
+
+
+def _X6(R, p):
+    """Motion transform parent -> child at (R, p): [[R^T, 0], [-R^T [p]x, R^T]]."""
+    Rt = R.T
+    B = Rt.mm(s.skew(p))
+    rows = []
+    for i in range(3):
+        rows.append(list(Rt.r[i]) + [0.0, 0.0, 0.0])
+    for i in range(3):
+        rows.append([s.mul(-1.0, x) for x in B.r[i]] + list(Rt.r[i]))
+    return rows
+
+
+def _I6(I: s.Inertia):
+    H = s.skew(I.h)
+    rows = [list(I.I.r[i]) + list(H.r[i]) for i in range(3)]
+    rows += [[s.mul(-1.0, x) for x in H.r[i]] + [I.m if j == i else 0.0 for j in range(3)] for i in range(3)]
+    return rows
 
 
 def aba(robot: Robot, q, qd, tau, f_ext=None):
     """Forward dynamics by the articulated-body algorithm: joint accelerations (n,)."""
     q, qd, tau = _checked(robot, q=q, qd=qd, tau=tau)
     n = robot.nq
-    ls = forward_pass(robot, q, qd)
-    X = [sp.motion_transform_6x6(ls.R[i], ls.p[i]) for i in range(n)]
-    S = [jnp.concatenate(joint_motion(robot, i)) for i in range(n)]
-    IA, pA, c = [], [], []
+    c = consts(robot)
+    ls = walk(robot, c, q, qd)
+    X = [_X6(ls.R[i], ls.p[i]) for i in range(n)]
+    S = [_v6(*motion(robot, c, i)) for i in range(n)]
+    IA, pA, cc = [], [], []
     for i in range(n):
-        pi = robot.inertia[i]
-        IA.append(sp.inertia_6x6(pi))
-        mw, mv = sp.inertia_apply(pi, ls.w[i], ls.v[i])
-        bw, bv = sp.cross_force(ls.w[i], ls.v[i], mw, mv)
-        b = jnp.concatenate([bw, bv])
+        I = c.inertia[i]
+        IA.append(_I6(I))
+        mw, mv = I.apply(ls.w[i], ls.v[i])
+        bw, bv = s.cross_force(ls.w[i], ls.v[i], mw, mv)
         if f_ext is not None:
-            b = b - jnp.concatenate([f_ext[i, 3:], f_ext[i, :3]])
-        pA.append(b)
-        sw, sv = joint_motion(robot, i)
-        cw, cv = sp.cross_motion(ls.w[i], ls.v[i], sw * qd[i], sv * qd[i])
-        c.append(jnp.concatenate([cw, cv]))
+            bw = bw - s.V3(f_ext[i, 3], f_ext[i, 4], f_ext[i, 5])
+            bv = bv - s.V3(f_ext[i, 0], f_ext[i, 1], f_ext[i, 2])
+        pA.append(_v6(bw, bv))
+        sw, sv = motion(robot, c, i)
+        cw, cv = s.cross_motion(ls.w[i], ls.v[i], sw.scale(qd[i]), sv.scale(qd[i]))
+        cc.append(_v6(cw, cv))
     U, D, u = [None] * n, [None] * n, [None] * n
     for i in reversed(range(n)):
-        U[i] = IA[i] @ S[i]
-        D[i] = S[i] @ U[i]
-        u[i] = tau[i] - S[i] @ pA[i]
+        U[i] = _mv6(IA[i], S[i])
+        D[i] = s.sum_(*(s.mul(a, b) for a, b in zip(S[i], U[i])))
+        u[i] = s.sub(tau[i], s.sum_(*(s.mul(a, b) for a, b in zip(S[i], pA[i]))))
         par = robot.parents[i]
         if par >= 0:
-            Ia = IA[i] - jnp.outer(U[i], U[i]) / D[i]
-            pa = pA[i] + Ia @ c[i] + U[i] * (u[i] / D[i])
-            IA[par] = IA[par] + X[i].T @ Ia @ X[i]
-            pA[par] = pA[par] + X[i].T @ pa
-    a0 = jnp.concatenate([jnp.zeros(3, dtype=tau.dtype), -robot.gravity])
+            Dinv = 1.0 / D[i]
+            Ia = [[s.sub(IA[i][r][k], s.mul(s.mul(U[i][r], U[i][k]), Dinv)) for k in range(6)] for r in range(6)]
+            uD = s.mul(u[i], Dinv)
+            Iac = _mv6(Ia, cc[i])
+            pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
+            XtIa = [list(col) for col in zip(*_mm6([list(r) for r in zip(*X[i])], Ia))]  # (X^T Ia)^T
+            XtIaX = _mm6([list(r) for r in zip(*XtIa)], X[i])
+            IA[par] = [[s.add(IA[par][r][k], XtIaX[r][k]) for k in range(6)] for r in range(6)]
+            Xtpa = _mtv6(X[i], pa)
+            pA[par] = [s.add(a, b) for a, b in zip(pA[par], Xtpa)]
+    a0 = [0.0, 0.0, 0.0] + list(-c.gravity)
     a = [None] * n
     qdd = [None] * n
     for i in range(n):
         par = robot.parents[i]
-        ap = X[i] @ (a0 if par < 0 else a[par]) + c[i]
-        qdd[i] = (u[i] - U[i] @ ap) / D[i]
-        a[i] = ap + S[i] * qdd[i]
-    return jnp.stack(qdd)
+        ap = [s.add(x, y) for x, y in zip(_mv6(X[i], a0 if par < 0 else a[par]), cc[i])]
+        qdd[i] = s.mul(s.sub(u[i], s.sum_(*(s.mul(x, y) for x, y in zip(U[i], ap)))), 1.0 / D[i])
+        a[i] = [s.add(x, s.mul(y, qdd[i])) for x, y in zip(ap, S[i])]
+    return s.stack(qdd, _dtype())
 
 
 def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
     """Joint accelerations (n,) from torques: ``qdd = M^-1 (tau - h)``.
 
-    ``method="aba"`` (default; the faster of the two in ``benchmarks/bench_dynamics.py``) or
+    ``method="aba"`` (default; see ``benchmarks/bench_dynamics.py`` for the measured choice) or
     ``"crba"`` (mass matrix and Cholesky solve).
     """
     if method == "aba":
@@ -220,16 +278,7 @@ def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
     return jax.scipy.linalg.cho_solve((L, True), jnp.asarray(tau) - h)
 
 
-def _body_regressor(w, v, aw, av):
-    """(6, 10) matrix A with (n; f) = I(pi) a + v x* I(pi) v = A pi (linear in pi)."""
-
-    def f(pi):
-        hw, hv = sp.inertia_apply(pi, aw, av)
-        mw, mv = sp.inertia_apply(pi, w, v)
-        cw, cv = sp.cross_force(w, v, mw, mv)
-        return jnp.concatenate([hw + cw, hv + cv])
-
-    return jax.jacfwd(f)(jnp.zeros(10, dtype=w.dtype))
+_UNIT_PARAMS = [s.Inertia.of([1.0 if j == k else 0.0 for j in range(10)]) for k in range(10)]
 
 
 def regressor(robot: Robot, q, qd, qdd):
@@ -240,45 +289,48 @@ def regressor(robot: Robot, q, qd, qdd):
     """
     q, qd, qdd = _checked(robot, q=q, qd=qd, qdd=qdd)
     n = robot.nq
-    ls = forward_pass(robot, q, qd, qdd)
-    S = [joint_motion(robot, i) for i in range(n)]
-    zero = jnp.zeros((1, 10), dtype=q.dtype)
-    Y = [[zero] * n for _ in range(n)]
+    c = consts(robot, inertia=False)
+    ls = walk(robot, c, q, qd, qdd)
+    Y = [[0.0] * (10 * n) for _ in range(n)]
     for j in range(n):
-        A = _body_regressor(ls.w[j], ls.v[j], ls.aw[j], ls.av[j])
-        An, Af = A[:3], A[3:]
-        i = j
-        while True:
-            sw, sv = S[i]
-            Y[i][j] = (sw @ An + sv @ Af)[None, :]
-            par = robot.parents[i]
-            if par < 0:
-                break
-            R, p = ls.R[i], ls.p[i]
-            Af_p = R @ Af
-            An = R @ An + sp.skew(p) @ Af_p
-            Af = Af_p
-            i = par
-    return jnp.concatenate([jnp.concatenate(row, axis=1) for row in Y], axis=0)
+        for k, E in enumerate(_UNIT_PARAMS):
+            # the body force is linear in the parameters: column k is the force of unit parameter k
+            hw, hv = E.apply(ls.aw[j], ls.av[j])
+            mw, mv = E.apply(ls.w[j], ls.v[j])
+            cw, cv = s.cross_force(ls.w[j], ls.v[j], mw, mv)
+            Fn, Ff = hw + cw, hv + cv
+            i = j
+            while True:
+                sw, sv = motion(robot, c, i)
+                Y[i][10 * j + k] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))
+                par = robot.parents[i]
+                if par < 0:
+                    break
+                Fn, Ff = s.force_to_parent(ls.R[i], ls.p[i], Fn, Ff)
+                i = par
+    dt = _dtype()
+    return jnp.stack([s.stack(row, dt) for row in Y])
 
 
 def kinetic_energy(robot: Robot, q, qd):
     """Kinetic energy [J]: sum over bodies of v^T I v / 2."""
     q, qd = _checked(robot, q=q, qd=qd)
-    ls = forward_pass(robot, q, qd)
+    c = consts(robot)
+    ls = walk(robot, c, q, qd)
     T = 0.0
     for i in range(robot.nq):
-        mw, mv = sp.inertia_apply(robot.inertia[i], ls.w[i], ls.v[i])
-        T = T + 0.5 * (jnp.dot(ls.w[i], mw) + jnp.dot(ls.v[i], mv))
-    return T
+        mw, mv = c.inertia[i].apply(ls.w[i], ls.v[i])
+        T = s.add(T, s.mul(0.5, s.add(s.dot(ls.w[i], mw), s.dot(ls.v[i], mv))))
+    return jnp.asarray(T, dtype=_dtype())
 
 
 def potential_energy(robot: Robot, q):
     """Gravitational potential energy [J] relative to the base origin: -sum m g . c."""
     (q,) = _checked(robot, q=q)
-    ls = forward_pass(robot, q)
+    c = consts(robot)
+    ls = walk(robot, c, q, world=True)
     V = 0.0
     for i in range(robot.nq):
-        pi = robot.inertia[i]
-        V = V - jnp.dot(robot.gravity, pi[0] * ls.op[i] + ls.oR[i] @ pi[1:4])
-    return V
+        I = c.inertia[i]
+        V = s.sub(V, s.dot(c.gravity, ls.op[i].scale(I.m) + ls.oR[i].mv(I.h)))
+    return jnp.asarray(V, dtype=_dtype())

@@ -37,6 +37,23 @@ def _progress(done, total, t0, label):
     sys.stderr.flush()
 
 
+def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True):
+    """A jitted batch version of a per-item ``fn``: evaluates it over the leading axis of its
+    arguments in blocks of ``batch_size`` (``lax.map``), so the working set of each block stays
+    in cache however large the batch.
+
+    ``fuse=False`` compiles without XLA's fusion pass (CPU only), which is fastest for the long
+    elementwise rigid-body kernels (``rnea``, ``crba``, ``aba``, ``regressor``); keep the default
+    ``True`` for anything else. Measured in ``benchmarks/bench_dynamics.py``.
+    """
+    opts = None if fuse or jax.default_backend() != "cpu" else {"xla_disable_hlo_passes": "fusion"}
+
+    def run(*args):
+        return jax.lax.map(lambda a: fn(*a), args, batch_size=batch_size)
+
+    return jax.jit(run, compiler_options=opts)
+
+
 def sweep(
     fn: Callable,
     *args,

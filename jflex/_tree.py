@@ -1,99 +1,128 @@
 """The one tree traversal every algorithm reuses.
 
-``forward_pass`` walks from the base to the leaves computing each body's placement, and (when
-asked) its spatial velocity and acceleration; ``backward_pass`` walks back accumulating spatial
-forces into parents; ``support`` lists a body's ancestors. Loops are Python loops over the static
-topology: they unroll into one straight-line XLA program per robot, which is what makes the
-vmapped kernels fast on CPU.
+``walk`` goes from the base to the leaves computing each body's placement and, when asked, its
+spatial velocity and acceleration; ``accumulate`` goes back adding spatial forces into parents;
+``support`` lists a body's ancestors. Loops are Python loops over the static topology: they
+unroll into one straight-line program per robot. The kernels work on the scalarised algebra of
+``_scalar`` (see there why); ``forward_pass`` returns the same quantities as arrays for code
+that wants them.
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
-from . import _spatial as sp
+from . import _scalar as s
 from ._robot import PRISMATIC, Robot
 
 
 class LinkStates(NamedTuple):
-    """Per-body quantities from :func:`forward_pass`; lists of length n (None where not asked)."""
+    """Per-body quantities; lists of length n (None where not asked). In ``walk`` the entries are
+    :class:`_scalar.V3`/:class:`_scalar.M33`, in ``forward_pass`` arrays."""
 
-    R: list  # (3,3) body axes in parent axes
-    p: list  # (3,) body origin in parent frame
-    oR: list  # (3,3) body axes in base axes
-    op: list  # (3,) body origin in base frame
+    R: list  # body axes in parent axes
+    p: list  # body origin in parent frame
+    oR: list | None  # body axes in base axes
+    op: list | None  # body origin in base frame
     w: list | None  # angular velocity, body axes
     v: list | None  # origin velocity, body axes
     aw: list | None  # spatial acceleration (angular), body axes
     av: list | None  # spatial acceleration (linear), body axes
 
 
-def joint_motion(robot: Robot, i: int):
-    """Motion subspace S_i as (s_w, s_v), body axes."""
-    z = jnp.zeros(3, dtype=robot.axis.dtype)
-    if robot.joint_types[i] == PRISMATIC:
-        return z, robot.axis[i]
-    return robot.axis[i], z
+def host(a):
+    """Robot leaves as NumPy when known at trace time (so their entries fold into constants)."""
+    return a if isinstance(a, jax.core.Tracer) else np.asarray(a)
 
 
-def joint_transform(robot: Robot, i: int, qi):
-    """(R, p) of body i in its parent's frame at joint value ``qi``."""
-    Rpl, ppl = robot.placement_R[i], robot.placement_p[i]
-    if robot.joint_types[i] == PRISMATIC:
-        return Rpl, ppl + sp.mv(Rpl, robot.axis[i] * qi)
-    return sp.mm(Rpl, sp.rot_axis_angle(robot.axis[i], qi)), ppl
+class RobotConsts(NamedTuple):
+    """A robot's per-body numbers in scalarised form, made once per trace."""
+
+    Rpl: list
+    ppl: list
+    axis: list
+    inertia: list
+    gravity: s.V3
 
 
-def forward_pass(robot: Robot, q, qd=None, qdd=None, base_acc=None) -> LinkStates:
-    """Placements, and velocities/accelerations when ``qd``/``qdd`` are given.
-
-    ``base_acc`` is the base's linear acceleration (3,); the default ``-gravity`` folds gravity in
-    as a fictitious upward acceleration of the base (Featherstone's trick), which is what RNEA wants.
-    """
+def consts(robot: Robot, inertia=True) -> RobotConsts:
+    R, p, ax = host(robot.placement_R), host(robot.placement_p), host(robot.axis)
     n = robot.nq
-    dtype = robot.placement_p.dtype
-    zero = jnp.zeros(3, dtype=dtype)
-    R, p, oR, op = [None] * n, [None] * n, [None] * n, [None] * n
-    want_v = qd is not None
-    want_a = qdd is not None
+    I = host(robot.inertia) if inertia else None
+    return RobotConsts(
+        [s.M33.of(R[i]) for i in range(n)],
+        [s.V3.of(p[i]) for i in range(n)],
+        [s.V3.of(ax[i]) for i in range(n)],
+        [s.Inertia.of(I[i]) for i in range(n)] if inertia else None,
+        s.V3.of(host(robot.gravity)),
+    )
+
+
+def motion(robot: Robot, c: RobotConsts, i: int):
+    """Motion subspace S_i as (s_w, s_v) in body axes (scalarised)."""
+    if robot.joint_types[i] == PRISMATIC:
+        return s.ZERO, c.axis[i]
+    return c.axis[i], s.ZERO
+
+
+def transform(robot: Robot, c: RobotConsts, i: int, qi):
+    """(R, p) of body i in its parent's frame at joint value ``qi`` (scalarised)."""
+    if robot.joint_types[i] == PRISMATIC:
+        return c.Rpl[i], c.ppl[i] + c.Rpl[i].mv(c.axis[i].scale(qi))
+    return c.Rpl[i].mm(s.rot_axis_angle(c.axis[i], jnp.cos(qi), jnp.sin(qi))), c.ppl[i]
+
+
+def walk(robot: Robot, c: RobotConsts, q, qd=None, qdd=None, base_acc: s.V3 | None = None, world=False) -> LinkStates:
+    """Forward pass. ``base_acc`` defaults to ``-gravity``: gravity enters as a fictitious upward
+    acceleration of the base (Featherstone's trick), which is what RNEA wants."""
+    n = robot.nq
+    R, p = [None] * n, [None] * n
+    oR = [None] * n if world else None
+    op = [None] * n if world else None
+    want_v, want_a = qd is not None, qdd is not None
     w = [None] * n if want_v else None
     v = [None] * n if want_v else None
     aw = [None] * n if want_a else None
     av = [None] * n if want_a else None
-    a0 = -robot.gravity if base_acc is None else base_acc
+    a0 = -c.gravity if base_acc is None else base_acc
     for i in range(n):
         par = robot.parents[i]
-        R[i], p[i] = joint_transform(robot, i, q[i])
-        if par < 0:
-            oR[i], op[i] = R[i], p[i]
-        else:
-            oR[i], op[i] = sp.compose(oR[par], op[par], R[i], p[i])
+        R[i], p[i] = transform(robot, c, i, q[i])
+        if world:
+            if par < 0:
+                oR[i], op[i] = R[i], p[i]
+            else:
+                oR[i], op[i] = oR[par].mm(R[i]), op[par] + oR[par].mv(p[i])
         if not want_v:
+            R[i], p[i] = s.barrier(R[i], p[i])
             continue
-        sw, sv = joint_motion(robot, i)
-        pw, pv = (zero, zero) if par < 0 else (w[par], v[par])
-        cw, cv = sp.motion_to_child(R[i], p[i], pw, pv)
-        w[i], v[i] = cw + sw * qd[i], cv + sv * qd[i]
+        sw, sv = motion(robot, c, i)
+        pw, pv = (s.ZERO, s.ZERO) if par < 0 else (w[par], v[par])
+        cw, cv = s.motion_to_child(R[i], p[i], pw, pv)
+        w[i], v[i] = cw + sw.scale(qd[i]), cv + sv.scale(qd[i])
         if not want_a:
+            R[i], p[i], w[i], v[i] = s.barrier(R[i], p[i], w[i], v[i])
             continue
-        paw, pav = (zero, a0) if par < 0 else (aw[par], av[par])
-        caw, cav = sp.motion_to_child(R[i], p[i], paw, pav)
-        bw, bv = sp.cross_motion(w[i], v[i], sw * qd[i], sv * qd[i])
-        aw[i], av[i] = caw + sw * qdd[i] + bw, cav + sv * qdd[i] + bv
+        paw, pav = (s.ZERO, a0) if par < 0 else (aw[par], av[par])
+        caw, cav = s.motion_to_child(R[i], p[i], paw, pav)
+        bw, bv = s.cross_motion(w[i], v[i], sw.scale(qd[i]), sv.scale(qd[i]))
+        aw[i], av[i] = caw + sw.scale(qdd[i]) + bw, cav + sv.scale(qdd[i]) + bv
+        R[i], p[i], w[i], v[i], aw[i], av[i] = s.barrier(R[i], p[i], w[i], v[i], aw[i], av[i])
     return LinkStates(R, p, oR, op, w, v, aw, av)
 
 
-def backward_pass(robot: Robot, ls: LinkStates, n_list: list, f_list: list):
-    """Accumulate body forces (n_i, f_i) into parents; returns the composite forces (lists)."""
+def accumulate(robot: Robot, ls: LinkStates, n_list: list, f_list: list):
+    """Backward pass: add each body's force (n_i, f_i) into its parent; returns composite forces."""
     n_acc, f_acc = list(n_list), list(f_list)
     for i in reversed(range(robot.nq)):
         par = robot.parents[i]
         if par >= 0:
-            dn, df = sp.force_to_parent(ls.R[i], ls.p[i], n_acc[i], f_acc[i])
-            n_acc[par] = n_acc[par] + dn
-            f_acc[par] = f_acc[par] + df
+            dn, df = s.force_to_parent(ls.R[i], ls.p[i], n_acc[i], f_acc[i])
+            n_acc[par], f_acc[par] = s.barrier(n_acc[par] + dn, f_acc[par] + df)
     return n_acc, f_acc
 
 
@@ -104,3 +133,38 @@ def support(robot: Robot, i: int) -> list[int]:
         out.append(i)
         i = robot.parents[i]
     return out
+
+
+# ---- array-valued views for code outside the kernels -------------------------------------
+
+
+def _arr(x, dtype):
+    if x is None:
+        return None
+    return x.array().astype(dtype) if isinstance(x, (s.V3, s.M33)) else x
+
+
+def forward_pass(robot: Robot, q, qd=None, qdd=None, base_acc=None) -> LinkStates:
+    """:func:`walk` with array outputs ((3, 3) rotations, (3,) vectors), world placements included."""
+    c = consts(robot, inertia=False)
+    b = None if base_acc is None else s.V3.of(base_acc)
+    ls = walk(robot, c, q, qd, qdd, b, world=True)
+    dt = jnp.result_type(float)
+    conv = lambda lst: None if lst is None else [_arr(x, dt) for x in lst]
+    return LinkStates(*(conv(f) for f in ls))
+
+
+def joint_motion(robot: Robot, i: int):
+    """Motion subspace S_i as arrays (s_w, s_v), body axes."""
+    z = jnp.zeros(3, dtype=robot.axis.dtype)
+    if robot.joint_types[i] == PRISMATIC:
+        return z, robot.axis[i]
+    return robot.axis[i], z
+
+
+def joint_transform(robot: Robot, i: int, qi):
+    """(R, p) arrays of body i in its parent's frame at joint value ``qi``."""
+    c = consts(robot, inertia=False)
+    R, p = transform(robot, c, i, qi)
+    dt = jnp.result_type(float)
+    return _arr(R, dt), _arr(p, dt)
