@@ -187,12 +187,27 @@ class Linearization(NamedTuple):
     keep: tuple[int, ...]
 
 
+def _static_forces(model: Model, t, x, xd, z):
+    """Generalised forces that survive at rest: gravity, the effects' potential forces, minus
+    their small-motion forces. At xd = 0 the velocity-quadratic Lagrange terms vanish together
+    with their first derivatives, so this is all a linearisation about rest needs."""
+    r, lay = model.rigid, model.layout
+    n, nx = r.nq, lay.nx
+    g = _pad(gravity(r, x[:n]), n, nx)
+    dV = jax.grad(lambda x_: _effect_energy(model, x_, jnp.zeros_like(x_))[1])(x)
+    f = jnp.zeros(nx, dtype=x.dtype)
+    for e, s in zip(model.effects, lay.slots):
+        f = f + e.linear_force(r, s, t, x, xd, z)
+    return g + dV - f
+
+
 def linearize(model: Model, x0, *, hold: tuple[str, ...] | tuple[int, ...] = (), t=0.0) -> Linearization:
     """Linearise the model about the static posture ``x0`` (xd = 0).
 
-    ``K = d(h - f)/dx`` (gravity stiffness included), ``C = d(h - f)/dxd``, ``M = M(x0)``.
+    ``K = d(g + dV/dx - f)/dx`` (gravity stiffness included), ``C = -df/dxd``, ``M = M(x0)``,
+    where ``f`` are the effects' small-motion forces (:meth:`AbstractEffect.linear_force`).
     ``hold`` names coordinates clamped to x0 (e.g. the motor angles under perfect position
-    control): their rows and columns are removed.
+    control): their rows and columns are removed, and only the kept ones are differentiated.
     """
     _check(model, x0, "x0")
     lay = model.layout
@@ -209,12 +224,12 @@ def linearize(model: Model, x0, *, hold: tuple[str, ...] | tuple[int, ...] = (),
             held.add(int(h))
     keep = tuple(i for i in range(lay.nx) if i not in held)
     idx = jnp.array(keep, dtype=int)
-    M = mass_matrix(model, x0)
-    K = jax.jacfwd(lambda x: bias_forces(model, t, x, zero, z0))(x0)
-    C = jax.jacfwd(lambda v: bias_forces(model, t, x0, v, z0))(zero)
+    embed = lambda base, sub: base.at[idx].set(sub)
+    M = mass_matrix(model, x0)[jnp.ix_(idx, idx)]
+    K = jax.jacfwd(lambda xs: _static_forces(model, t, embed(x0, xs), zero, z0)[idx])(x0[idx])
+    C = jax.jacfwd(lambda vs: _static_forces(model, t, x0, embed(zero, vs), z0)[idx])(zero[idx])
     B = input_matrix(model)
-    sel = lambda A: A[jnp.ix_(idx, idx)]
-    return Linearization(sel(M), sel(C), sel(K), B[idx], tuple(lay.coord_names[i] for i in keep), keep)
+    return Linearization(M, C, K, B[idx], tuple(lay.coord_names[i] for i in keep), keep)
 
 
 def dynamic_stiffness(model: Model, x0, omega, *, hold=()):

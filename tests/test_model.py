@@ -70,3 +70,14 @@ def test_model_rejects_wrong_state_length():
     robot, _ = _robot()
     with pytest.raises(jflex.ShapeError, match="x must have shape"):
         jflex.mass_matrix(jflex.Model(robot), jnp.zeros(robot.nq + 1))
+
+
+def test_linearisation_leaves_out_coulomb_friction():
+    """At rest Coulomb friction sticks: it must not appear as a steep viscous term in C."""
+    robot, rng = _robot(2)
+    n = robot.nq
+    fj = jflex.effects.FlexibleJoints(np.full(n, 1e4), np.full(n, 5.0), np.full(n, 0.1),
+                                      link_coulomb=np.full(n, 20.0), motor_coulomb=np.full(n, 20.0))
+    model = jflex.Model(robot, [fj])
+    lin = jflex.linearize(model, jnp.zeros(2 * n), hold=model.layout.coord_names[n:])
+    np.testing.assert_allclose(lin.C, 5.0 * np.eye(n), atol=1e-9)

@@ -75,6 +75,12 @@ class AbstractEffect(eqx.Module):
         """Non-conservative generalised force on x, shape (nx,) (friction, damping). Default 0."""
         return jnp.zeros(slots.nx)
 
+    def linear_force(self, robot, slots: Slots, t, x, xd, z):
+        """The part of ``generalized_force`` that acts in small vibrations about a posture at rest,
+        used by the linearisation. Default: all of it. Friction laws leave out Coulomb terms,
+        which stick at rest rather than act as a steep viscous damper."""
+        return self.generalized_force(robot, slots, t, x, xd, z)
+
     def state_rate(self, robot, slots: Slots, t, x, xd, z):
         """Time derivative of this effect's internal states, shape (len(state_names),)."""
         return jnp.zeros(len(self.state_names(robot)))

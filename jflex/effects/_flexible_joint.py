@@ -225,6 +225,14 @@ class FlexibleJoints(AbstractEffect):
         f = jnp.zeros(slots.nx, dtype=xd.dtype).at[idx].add(f_link)
         return f.at[slots.coords].add(f_motor)
 
+    def linear_force(self, robot, slots: Slots, t, x, xd, z):
+        # small vibrations at rest: joint damping and viscous friction act, Coulomb friction sticks
+        idx = jnp.array(self.joints, dtype=int)
+        qd, thd = self._split(slots, xd)
+        joint = self._matrix(self.damping) @ (qd - thd)
+        f = jnp.zeros(slots.nx, dtype=xd.dtype).at[idx].add(-joint - self.link_viscous * qd)
+        return f.at[slots.coords].add(joint - self.motor_viscous * thd)
+
     def actuation(self, robot, slots: Slots, B):
         idx = jnp.array(self.joints, dtype=int)
         rows = B[idx]
