@@ -7,7 +7,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ._errors import ConfigError
-from ._robot import PRISMATIC, REVOLUTE, Robot, make_robot
+from ._robot import PRISMATIC, REVOLUTE, Robot, make_robot, move_params
 
 
 def _rx(a):
@@ -75,19 +75,6 @@ def _inertial_params(spec, where: str) -> np.ndarray:
     if p.shape != (10,):
         raise ConfigError(f"{where}: expected a mapping or 10 numbers, got shape {p.shape}")
     return p
-
-
-def _transform_params(pi, T):
-    """Parameters given in frame A -> frame B, where A sits at T (4x4) in B."""
-    m = pi[0]
-    R, p = T[:3, :3], T[:3, 3]
-    I_o = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
-    c = pi[1:4] / m if m > 0 else np.zeros(3)
-    I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
-    c2 = R @ c + p
-    I2 = R @ I_c @ R.T + m * (c2 @ c2 * np.eye(3) - np.outer(c2, c2))
-    h = m * c2
-    return np.array([m, *h, I2[0, 0], I2[0, 1], I2[1, 1], I2[0, 2], I2[1, 2], I2[2, 2]])
 
 
 def from_dh(
@@ -166,7 +153,7 @@ def from_dh(
         Rs.append(T[:3, :3])
         ps.append(T[:3, 3])
         pi = _inertial_params(inertias[i] if inertias is not None else None, f"inertias[{i}]")
-        params.append(_transform_params(pi, body_from_dh) if convention == "standard" else pi)
+        params.append(move_params(pi, body_from_dh) if convention == "standard" else pi)
 
     if tool is not None:
         tool = np.asarray(tool, dtype=float)

@@ -219,3 +219,19 @@ def check_q(robot: Robot, q, name: str = "q"):
             f"{name} must have shape ({robot.nq},) for this robot (joints {list(robot.joint_names)}), got {shape}; "
             "batch with jax.vmap or jflex.sweep"
         )
+
+
+def move_params(pi, T) -> np.ndarray:
+    """10 inertial parameters given in frame A -> the same body in frame B, A sitting at the 4x4
+    transform ``T`` in B (NumPy; for builders)."""
+    pi = np.asarray(pi, dtype=float)
+    m = pi[0]
+    if m == 0:
+        return np.zeros(10)
+    R, p = T[:3, :3], T[:3, 3]
+    I_o = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
+    c = pi[1:4] / m
+    I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
+    c2 = R @ c + p
+    I2 = R @ I_c @ R.T + m * (c2 @ c2 * np.eye(3) - np.outer(c2, c2))
+    return np.array([m, *(m * c2), I2[0, 0], I2[0, 1], I2[1, 1], I2[0, 2], I2[1, 2], I2[2, 2]])

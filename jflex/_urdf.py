@@ -10,7 +10,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from ._errors import URDFError
-from ._robot import PRISMATIC, REVOLUTE, Robot, check_inertia, make_robot
+from ._robot import PRISMATIC, REVOLUTE, Robot, check_inertia, make_robot, move_params
 from ._errors import ParameterError
 
 _MOVING = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
@@ -96,20 +96,6 @@ def _link_inertia(link, fname):
     return pi
 
 
-def _move_params(pi, T):
-    """Parameters in frame A -> frame B (A at T in B)."""
-    m = pi[0]
-    if m == 0:
-        return np.zeros(10)
-    R, p = T[:3, :3], T[:3, 3]
-    I_o = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
-    c = pi[1:4] / m
-    I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
-    c2 = R @ c + p
-    I2 = R @ I_c @ R.T + m * (c2 @ c2 * np.eye(3) - np.outer(c2, c2))
-    return np.array([m, *(m * c2), I2[0, 0], I2[0, 1], I2[1, 1], I2[0, 2], I2[1, 2], I2[2, 2]])
-
-
 def load_urdf(path: str | os.PathLike, *, gravity=(0.0, 0.0, -9.81)) -> Robot:
     """Load a fixed-base URDF into a :class:`Robot`.
 
@@ -187,7 +173,7 @@ def _from_element(root, fname, gravity) -> Robot:
 
     def visit(link_name, body, T_body_link):
         nonlocal base_params
-        pi = _move_params(_link_inertia(links[link_name], fname), T_body_link)
+        pi = move_params(_link_inertia(links[link_name], fname), T_body_link)
         if body < 0:
             base_params = base_params + pi
         else:
