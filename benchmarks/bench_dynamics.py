@@ -156,6 +156,31 @@ def bench_adam(path, joint_names, q, qd, qdd):
         return None
 
 
+def bench_jaxsim(path, joint_names, q, qd, qdd):
+    """jaxsim inverse dynamics (floating-base API, base held still), if it installs and loads."""
+    try:
+        import jaxsim.api as js
+    except ImportError:
+        return None
+    try:
+        m = js.model.JaxSimModel.build_from_model_description(
+            _strip_geometry(path), is_urdf=True, considered_joints=list(joint_names)
+        )
+
+        def inv(a, b, c):
+            d = js.data.JaxSimModelData.build(model=m, joint_positions=a, joint_velocities=b)
+            return js.model.inverse_dynamics(m, d, joint_accelerations=c, base_acceleration=jnp.zeros(6))[1]
+
+        f = jax.jit(jax.vmap(inv))
+        t0 = time.perf_counter()
+        jax.block_until_ready(f(q, qd, qdd))
+        comp = time.perf_counter() - t0
+        return {"rnea": best_time(lambda: jax.block_until_ready(f(q, qd, qdd)))}, {"rnea": comp}
+    except Exception as exc:  # e.g. its URDF importer needs a Gazebo executable
+        print(f"  jaxsim: skipped ({type(exc).__name__}: {str(exc)[:120]})")
+        return None
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--batches", type=int, nargs="+", default=[1, 1000, 100000])
@@ -173,6 +198,7 @@ def main(argv=None):
         jt, jc = bench_jflex(robot, q, qd, qdd, np.asarray(tau))
         pt = bench_pinocchio(model, q, qd, qdd, np.asarray(tau)) if N <= args.pin_max else {}
         mj = bench_mjx(path, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
+        bench_jaxsim(path, robot.joint_names, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
         ad = bench_adam(path, robot.joint_names, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
         for name in jt:
             row = {
