@@ -114,3 +114,6 @@ from ._lagrangian import (
     lagrangian_bias as lagrangian_bias, lagrangian_forward_dynamics as lagrangian_forward_dynamics,
     lagrangian_mass_matrix as lagrangian_mass_matrix,
 )
+
+# identification (issue 5): equation-error and output-error fits, EMA helpers
+from . import identify as identify

@@ -112,8 +112,10 @@ class ModalData(AbstractData):
       when shapes are given): pair each measured mode with a model mode by the best MAC at each
       posture, which survives modes swapping order while the parameters move.
     - ``hold``, ``frame``: as in :func:`jflex.modal_analysis` (seed 003: ``hold="actuated"``).
-    - ``weights``: ``(w_f, w_zeta, w_mac)``; frequency residuals are relative, damping residuals
-      are absolute in units of ``damping_scale`` (default 0.01, i.e. one percentage point).
+    - ``weights``: ``(w_f, w_zeta, w_mac)``; frequency residuals are relative in units of
+      ``frequency_scale`` (default 0.01: one percent), damping residuals absolute in units of
+      ``damping_scale`` (default 0.01: one percentage point), so that by default a 1 % frequency
+      error weighs like a 1-point damping error (how EMA tables are usually compared).
     """
 
     postures: jnp.ndarray
@@ -122,13 +124,14 @@ class ModalData(AbstractData):
     shapes: jnp.ndarray | None
     weights: jnp.ndarray
     damping_scale: jnp.ndarray
+    frequency_scale: jnp.ndarray
     mode_index: tuple | str = eqx.field(static=True)
     hold: object = eqx.field(static=True)
     frame: str | None = eqx.field(static=True)
     name: str = eqx.field(static=True)
 
     def __init__(self, postures, frequency, damping, shapes=None, *, mode_index=None, hold="actuated", frame=None,
-                 weights=(1.0, 1.0, 1.0), damping_scale=0.01, name="modal", source=None):
+                 weights=(1.0, 1.0, 1.0), damping_scale=0.01, frequency_scale=0.01, name="modal", source=None):
         p = _postures(postures, source)
         f = np.atleast_2d(np.asarray(frequency, dtype=float))
         z = np.atleast_2d(np.asarray(damping, dtype=float))
@@ -146,6 +149,7 @@ class ModalData(AbstractData):
             raise DataError(f"{source or 'ModalData'}: field 'shapes': expected (P, s, m) = ({p.shape[0]}, s, {f.shape[1]}), got {self.shapes.shape}")
         self.weights = jnp.asarray(weights, dtype=float)
         self.damping_scale = jnp.asarray(damping_scale, dtype=float)
+        self.frequency_scale = jnp.asarray(frequency_scale, dtype=float)
         if mode_index is None:
             mode_index = "mac" if shapes is not None else tuple(range(f.shape[1]))
         if isinstance(mode_index, str):
@@ -196,7 +200,7 @@ class ModalData(AbstractData):
         ef, ez, em, ok_f, ok_z = self._parts(model)
         nf = jnp.maximum(ok_f.sum(), 1)
         nz = jnp.maximum(ok_z.sum(), 1)
-        out = {f"{self.name}:frequency": self.weights[0] * ef.ravel() / jnp.sqrt(nf),
+        out = {f"{self.name}:frequency": self.weights[0] * ef.ravel() / (self.frequency_scale * jnp.sqrt(nf)),
                f"{self.name}:damping": self.weights[1] * ez.ravel() / jnp.sqrt(nz)}
         if em is not None:
             out[f"{self.name}:mac"] = self.weights[2] * em.ravel() / jnp.sqrt(em.size)
