@@ -10,6 +10,7 @@ import jflex
 from jflex import identify as idf
 
 from _identify_helpers import staubli_like
+from conftest import SLOW
 
 
 def test_fourier_trajectory_derivatives_match_autodiff():
@@ -48,7 +49,7 @@ def test_design_excitation_improves_condition_within_limits():
     robot = robot.replace(lower=jnp.array([-2.5, -0.5, -2.2]), upper=jnp.array([0.5, 2.6, 0.1]))
     bp = idf.base_parameters(robot)
     res = idf.design_excitation(robot, bp, n_harmonics=3, n_samples=40, velocity_limit=[2.6, 2.6, 2.6],
-                                workspace=("tool", [-1.0, -2.0, 0.1], [2.0, 1.0, 2.6]), max_steps=60 if not __import__("conftest").SLOW else 300,
+                                workspace=("tool", [-1.0, -2.0, 0.1], [2.0, 1.0, 2.6]), max_steps=300 if SLOW else 60,
                                 penalties=(1e2, 1e4))
     # Independent evaluation on a 4x finer grid of the designed trajectory.
     t = np.linspace(0, float(res.trajectory.period), 160, endpoint=False)

@@ -12,6 +12,7 @@ import jflex
 from jflex import identify as idf
 
 from _identify_helpers import staubli_like
+from conftest import SLOW
 
 _TOL = 1e-7
 
@@ -115,7 +116,7 @@ def _kc_spec():
 
 def test_multi_posture_frf_fit_recovers_joint_stiffness_and_damping():
     true = _flex_model(_K, _C)
-    omega = 2 * np.pi * np.linspace(2, 60, 60)
+    omega = 2 * np.pi * np.linspace(2, 60, 120 if SLOW else 30)
     H = jax.jit(jax.vmap(lambda q: jflex.frf(true, q, omega, hold="actuated", frame="tool")))(jnp.asarray(_POSTURES))
     data = idf.FRFData(_POSTURES, omega, np.asarray(H), frame="tool")
     start = _flex_model(_K * [1.5, 0.5, 1.5], _C * [0.5, 1.5, 0.5])
@@ -125,6 +126,7 @@ def test_multi_posture_frf_fit_recovers_joint_stiffness_and_damping():
     assert res.nrmse["frf:log_magnitude"] < 1e-8
 
 
+@pytest.mark.slow
 def test_modal_table_fit_with_mac_pairing():
     true = _flex_model(_K, _C)
     f, z, sh = jax.vmap(lambda q: idf.model_modes(true, q, frame="tool"))(jnp.asarray(_POSTURES))
@@ -162,7 +164,7 @@ def test_interrupt_keeps_best_and_minimiser_path():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("segments", [1, 4])
+@pytest.mark.parametrize("segments", [4, 1] if SLOW else [4])
 def test_time_response_fit_unknown_initial_state_and_multiple_shooting(segments):
     robot = _pendulum()
     fr = lambda fv: jflex.effects.JointFriction(robot.joint_names, viscous=[fv], coulomb=[0.0], stribeck_velocity=1e-6)
