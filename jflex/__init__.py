@@ -117,3 +117,4 @@ from ._lagrangian import (
 
 # identification (issue 5): equation-error and output-error fits, EMA helpers
 from . import identify as identify
+from . import gap as gap  # sim-to-real gap diagnosis (issue 6)
