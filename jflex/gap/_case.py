@@ -248,7 +248,7 @@ def load_case(path) -> Case:
         raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
     cfg = load_yaml(file)
     base = file.parent
-    known = {"robot", "tool_frame", "nominal_effects", "datasets", "noise", "options", "name", "notes"}
+    known = {"robot", "robot_inertia", "tool_frame", "nominal_effects", "datasets", "noise", "options", "name", "notes"}
     for k in cfg:
         if k not in known:
             raise _err(file, k, f"unknown field; known fields: {sorted(known)}")
@@ -262,6 +262,17 @@ def load_case(path) -> Case:
         robot = load_robot(str(rp) if rp.suffix.lower() in (".urdf", ".yaml", ".yml") else spec)
     except JFlexError as exc:
         raise ConfigError(f"{file}: field 'robot': {exc}") from None
+    if "robot_inertia" in cfg:
+        # link parameters realised from identified base parameters need not be physically
+        # consistent per link (only their combinations are identified): taken as they are
+        ip = base / str(cfg["robot_inertia"])
+        arr = _load_npz(ip, "robot_inertia", file)
+        if "inertia" not in arr:
+            raise DataError(f"{ip}: field 'inertia': missing ((n, 10) link parameters in Pinocchio's order)")
+        P = _num(arr["inertia"], ip, "inertia", ndim=2)
+        if P.shape != (robot.nq, 10):
+            raise DataError(f"{ip}: field 'inertia': expected shape ({robot.nq}, 10), got {P.shape}")
+        robot = robot.replace(inertia=P)
     tool = cfg.get("tool_frame")
     if tool is not None:
         try:

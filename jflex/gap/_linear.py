@@ -123,7 +123,7 @@ def augment(robot, springs, payload: bool = False):
         parents=[-1 if j["parent"] is None else names.index(j["parent"]) for j in joints],
         joint_types=[j["type"] for j in joints], placement_R=np.stack([j["R"] for j in joints]),
         placement_p=np.stack([j["p"] for j in joints]), axis=np.stack([j["axis"] for j in joints]),
-        inertia=np.stack([j["inertia"] for j in joints]), gravity=np.asarray(robot.gravity),
+        gravity=np.asarray(robot.gravity),
         # limits are left out: the linear analysis does not use them (and make_robot rejects the
         # infinite limits of virtual joints when passed explicitly)
         frame_names=[f["name"] for f in frames],
@@ -131,6 +131,9 @@ def augment(robot, springs, payload: bool = False):
         frame_R=np.stack([f["R"] for f in frames]) if frames else None,
         frame_p=np.stack([f["p"] for f in frames]) if frames else None, base_name=robot.base_name,
     )
+    # inertias set after the build: a base-parameter realisation need not pass make_robot's
+    # per-link physical checks, and the linear analysis does not need it to
+    aug = aug.replace(inertia=np.stack([j["inertia"] for j in joints]))
     jn = list(aug.joint_names)
     coord = []
     for s in springs:
@@ -266,7 +269,12 @@ class LinearModel:
 
 
 def _gen_eig(K, M):
-    L = np.linalg.cholesky(M + 1e-12 * np.trace(M) * np.eye(len(M)))
+    try:
+        L = np.linalg.cholesky(M + 1e-12 * np.trace(M) * np.eye(len(M)))
+    except np.linalg.LinAlgError:
+        # a non-physical mass matrix (e.g. a base-parameter realisation seen through a virtual
+        # joint): no modes; the candidate's residuals become large and it is not selected
+        return np.full(len(M), np.nan), np.eye(len(M))
     Li = np.linalg.inv(L)
     A = Li @ K @ Li.T
     lam, U = np.linalg.eigh(0.5 * (A + A.T))
@@ -274,7 +282,7 @@ def _gen_eig(K, M):
 
 
 # --- data residuals ----------------------------------------------------------------------------
-def match_modes(f_model, f_meas):
+def match_modes(f_model, f_meas, return_assigned: bool = False):
     """Assign measured modes to model modes by relative frequency distance (one-to-one where the
     model has modes left; a measured mode beyond the model's count takes its nearest mode).
 
@@ -283,30 +291,41 @@ def match_modes(f_model, f_meas):
 
     M = len(f_meas)
     if len(f_model) == 0:
-        return np.full(M, -1), np.ones(M)
+        return (np.full(M, -1), np.ones(M), np.zeros(M, bool)) if return_assigned else (np.full(M, -1), np.ones(M))
     cost = np.abs(f_model[None, :] - f_meas[:, None]) / f_meas[:, None]
     cost = np.where(np.isfinite(cost), cost, 1e6)
     rows, cols = linear_sum_assignment(cost)
     idx = np.full(M, -1)
     idx[rows] = cols
+    assigned = idx >= 0
     for i in range(M):
         if idx[i] < 0:
             idx[i] = int(np.argmin(cost[i]))
     rel = (f_model[idx] - f_meas) / f_meas
+    if return_assigned:
+        return idx, rel, assigned
     return idx, rel
 
 
 DAMPING_WEIGHT = 0.1  # a 10 % damping-ratio misfit counts like a 1 % frequency misfit
 
 
-def modal_errors(lm: LinearModel, x, arr):
+def modal_errors(lm: LinearModel, x, arr, fitting: bool = False):
+    """Relative frequency and damping errors of a modal table. When ``fitting``, measured modes
+    left over after the one-to-one assignment (the model has fewer modes) do not pull the fit:
+    they are the gap a candidate must explain, not something the nominal stiffness should
+    compromise for."""
     f, z = lm.modes(x, arr["q0"])
-    idx, ef = match_modes(f, arr["freq"])
+    idx, ef, assigned = match_modes(f, arr["freq"], return_assigned=True)
+    if fitting:
+        ef = np.where(assigned, ef, 0.0)
     zm = arr["zeta"]
     ok = np.isfinite(zm)
     ez = np.zeros_like(ef)
     if len(f):
         ez[ok] = (z[idx][ok] - zm[ok]) / np.maximum(zm[ok], 0.005)
+    if fitting:
+        ez = np.where(assigned, ez, 0.0)
     return ef, ez, idx, f, z
 
 
@@ -345,7 +364,7 @@ def frf_peaks(freq, H, prominence=0.03):
 
 
 PEAK_WEIGHT = 1.0  # FRF training sets also enter through their picked peaks (smooth in log k)
-FIT_STRIDE = 3  # every 3rd frequency of a measured FRF enters the fit (peaks stay resolved)
+FIT_STRIDE = 4  # every 3rd frequency of a measured FRF enters the fit (peaks stay resolved)
 
 
 def residual(lm: LinearModel, x, train, peaks_only: bool = False) -> np.ndarray:
@@ -371,15 +390,16 @@ def residual(lm: LinearModel, x, train, peaks_only: bool = False) -> np.ndarray:
             pf, pz = a["_peaks"]
             if len(pf):
                 fm, zm = lm.modes(x, a["q0"])
-                idx, ef = match_modes(fm, pf)
-                okz = np.isfinite(pz)
+                idx, ef, assigned = match_modes(fm, pf, return_assigned=True)
+                ef = np.where(assigned, ef, 0.0)
+                okz = np.isfinite(pz) & assigned
                 ez = np.zeros_like(ef)
                 if len(fm):
                     ez[okz] = (zm[idx][okz] - pz[okz]) / np.maximum(pz[okz], 0.005)
                 out += [PEAK_WEIGHT * ef / np.sqrt(len(ef)), PEAK_WEIGHT * DAMPING_WEIGHT * ez / np.sqrt(len(ez))]
             out += [e.real.ravel(), e.imag.ravel()]
         elif d.kind == "modal":
-            ef, ez, *_ = modal_errors(lm, x, a)
+            ef, ez, *_ = modal_errors(lm, x, a, fitting=True)
             out += [ef / np.sqrt(len(ef)), DAMPING_WEIGHT * ez / np.sqrt(len(ez))]
     r = np.concatenate(out) if out else np.zeros(0)
     return np.where(np.isfinite(r), r, 1e3)
@@ -407,7 +427,7 @@ def fit_linear(lm: LinearModel, x0, train, free=None, starts=()):
             # FRF misfit has spurious minima at vanishing or huge damping
             u0 = np.clip(xs[free], -50, 50)
             width = np.where(np.arange(len(xs))[free] % (2 * len(lm.structure.springs) or 1) < len(lm.structure.springs), 3.0, 4.0)
-            sol = so.least_squares(fun, u0, method="trf", bounds=(u0 - width, u0 + width), max_nfev=30 * (1 + free.sum()))
+            sol = so.least_squares(fun, u0, method="trf", bounds=(u0 - width, u0 + width), max_nfev=15 * (1 + free.sum()))
             xs = xs.copy()
             xs[free] = sol.x
         r = residual(lm, xs, train)
