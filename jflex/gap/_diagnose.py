@@ -373,9 +373,11 @@ PARSIMONY = 5.0  # [%] a nested simpler effect within this shrink of the richer 
 
 
 def _rank(entries) -> list[int]:
-    """Order by held-out criterion; a simpler nested effect at the same place that closes nearly
-    as much (within PARSIMONY points of shrink) goes first."""
-    order = sorted(range(len(entries)), key=lambda i: -entries[i]["score"])
+    """Order by the held-out shrink, then the criterion; a simpler nested effect at the same place
+    that closes nearly as much (within PARSIMONY points of shrink) goes first."""
+    # the held-out gap closed decides (rounded to a point, so noise-level differences tie), the
+    # information criterion breaks ties
+    order = sorted(range(len(entries)), key=lambda i: (-round(entries[i]["shrink"]), -entries[i]["score"]))
     changed = True
     while changed:
         changed = False
@@ -640,13 +642,13 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
             score = -_ic_delta(ev, ev_cur, _n_params(c))
             _, _, exc = _combine(ev, floor)
             step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
-            key = score
+            key = (round(step_shrink), score)
             if best is not None and NESTED.get(best[1].effect) == c.effect and best[1].joint == c.joint \
                     and step_shrink >= best[5] - PARSIMONY:
-                key = best[0] + 1e-9  # the simpler nested effect wins a near tie
+                key = (best[0][0], best[0][1] + 1e-9, 1)  # the simpler nested effect wins a near tie
             elif best is not None and NESTED.get(c.effect) == best[1].effect and best[1].joint == c.joint \
                     and best[5] >= step_shrink - PARSIMONY:
-                key = -np.inf
+                key = (-np.inf, -np.inf)
             if best is None or key > best[0]:
                 best = (key, c, st, ev, score, step_shrink)
         if best is None:
