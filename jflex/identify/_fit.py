@@ -238,7 +238,7 @@ class FitResult:
       fitted data-side parameters (initial states).
     - ``values``, ``std``: dict name -> physical value and its standard deviation.
     - ``labels`` (static): one label per scalar parameter; ``covariance`` (p, p) Gauss-Newton
-      ``s^2 (J^T J)^+`` in physical units, ``s^2 = |r|^2 / (m - p)``.
+      ``s^2 (J^T J)^+`` in physical units, ``s^2 = |r|^2 / (m - p)`` (NaN when m <= p: exactly determined).
     - ``singular_values`` (p,): of the residual Jacobian w.r.t. the optimisation variables
       (``d r / d u``: relative changes for :class:`Log`, start-magnitude units for
       :class:`Identity`), largest first; ``weak_directions``: for singular values below
@@ -403,14 +403,15 @@ def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, 
     J, r = np.asarray(J), np.asarray(r)
     nrmse = {k: float(v) for k, v in nrmse.items()}
     m_, n_ = J.shape
-    s2 = float(r @ r) / max(m_ - n_, 1)
+    # With no more residuals than parameters the noise level cannot be estimated from the fit.
+    s2 = float(r @ r) / (m_ - n_) if m_ > n_ else float("nan")
     # Parameters and the prior are folded into the information matrix so that a prior counts.
     info = J.T @ J
     pr = []
     for f, s in zip(spec.frees, spec.shapes):
         k = int(np.prod(s))
         pr += list(np.broadcast_to(np.asarray(f.prior[1], float), s).ravel() ** -2.0) if f.prior is not None else [0.0] * k
-    info = info + np.diag(pr) * s2 if any(pr) else info
+    info = info + np.diag(pr) * (s2 if np.isfinite(s2) else 1.0) if any(pr) else info
     cov = s2 * np.linalg.pinv(info)
     std_flat = np.sqrt(np.clip(np.diag(cov), 0, None))
     # Columns scaled by dp/du: the sensitivities to the optimisation variables, which are relative
