@@ -53,7 +53,11 @@ def rigid_friction(c, rng, run_dir):
     traj = design.trajectory
     T = float(traj.period)
     fs = float(c["sample_rate_Hz"])
-    t = np.arange(int(round(c["periods"] * T * fs))) / fs
+    n_per = T * fs
+    if abs(n_per - round(n_per)) > 1e-6:
+        raise jflex.ConfigError(f"rigid_friction: one period holds {n_per:.4f} samples; spectral differentiation needs whole periods "
+                                "(choose omega_f and sample_rate_Hz so that 2 pi fs / omega_f is an integer)")
+    t = np.arange(int(round(c["periods"] * n_per))) / fs
     q, qd, qdd = (np.asarray(a) for a in traj.sample(t))
     theta = np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B))
     tau = np.asarray(reg.stack(robot, q, qd, qdd) @ theta).reshape(-1, 3)
@@ -61,7 +65,9 @@ def rigid_friction(c, rng, run_dir):
     q_m = q + rng.normal(size=q.shape) * float(c["position_noise_rad"])
     tau_m = tau + rng.normal(size=tau.shape) * sig
     qf, qdf, qddf = idf.spectral_derivatives(q_m, 1 / fs, cutoff=float(c["cutoff_Hz"]))
-    taf = idf.fft_lowpass(tau_m, 1 / fs, float(c["cutoff_Hz"]))
+    # Torques are not low-passed: their Coulomb steps would be smoothed while the regressor's
+    # sign(qd) columns are not (a bias); white torque noise is what least squares averages out.
+    taf = tau_m
     A = np.asarray(bp.columns(reg.stack(robot, qf, qdf, qddf)))
     truth = np.asarray(bp.project(theta))
     out = {"base_parameter_count": bp.rank, "groups": bp.report(), "excitation_cond": design.cond,
