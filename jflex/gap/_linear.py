@@ -171,6 +171,19 @@ class LinearStructure:
         return 2 * len(self.springs) + int(self.payload)
 
 
+def _quiet(fn):
+    # trial parameters of a fit can overflow or meet a singular matrix; those show up as NaN/inf
+    # residuals (handled by the callers), not as warnings on the console
+    import functools
+
+    @functools.wraps(fn)
+    def wrapped(*a, **k):
+        with np.errstate(all="ignore"):
+            return fn(*a, **k)
+
+    return wrapped
+
+
 class LinearModel:
     """Evaluates FRFs and modes of a :class:`LinearStructure` at postures, parameters in log form:
     ``[log k_s, log c_s (or eta_s) for each spring, log m_payload]``."""
@@ -234,6 +247,7 @@ class LinearModel:
         D = Kg[None] - w[:, :, None] ** 2 * M[None] + d[:, :, None] * np.eye(len(k))[None]
         return D, M
 
+    @_quiet
     def frf(self, x, q0, freq_hz):
         """Tool receptance (F, 3, 3) [m/N]."""
         P = self.mats(q0)
@@ -243,6 +257,7 @@ class LinearModel:
         G = np.linalg.solve(D, np.broadcast_to(P.J.T, D.shape[:1] + P.J.T.shape).astype(complex))
         return P.J[None] @ G
 
+    @_quiet
     def modes(self, x, q0):
         """(f [Hz], zeta) of the elastic modes, sorted; light-damping approximation: shapes from
         the real stiffness, ``w_r^2`` its Rayleigh quotient at ``w_r`` (iterated for frequency-
