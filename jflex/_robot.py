@@ -137,7 +137,10 @@ def make_robot(
         a = np.asarray(x, dtype=float)
         if a.shape != shape:
             raise ShapeError(f"Robot.{field}: expected shape {shape}, got {a.shape}")
-        if not np.all(np.isfinite(a)) and field not in ("lower", "upper", "velocity_limit", "effort_limit"):
+        if field in ("lower", "upper", "velocity_limit", "effort_limit"):
+            if np.isnan(a).any():  # limits may be infinite (no limit), never NaN
+                raise ParameterError(f"Robot.{field}: contains NaN")
+        elif not np.all(np.isfinite(a)):
             raise ParameterError(f"Robot.{field}: contains NaN or inf")
         return a
 
@@ -153,8 +156,8 @@ def make_robot(
     nf = len(frame_names)
     fR = np.tile(np.eye(3), (nf, 1, 1)) if frame_R is None else arr(frame_R, (nf, 3, 3), "frame_R")
     fp = np.zeros((nf, 3)) if frame_p is None else arr(frame_p, (nf, 3), "frame_p")
-    full = lambda x, v: np.full(n, v) if x is None else arr(x, (n,), "limits")
-    lo, hi = full(lower, -np.inf), full(upper, np.inf)
+    full = lambda x, v, field: np.full(n, v) if x is None else arr(x, (n,), field)
+    lo, hi = full(lower, -np.inf, "lower"), full(upper, np.inf, "upper")
     for i in range(n):
         if lo[i] > hi[i]:
             raise ParameterError(f"joint '{joint_names[i]}': lower limit {lo[i]} exceeds upper limit {hi[i]}")
@@ -166,8 +169,8 @@ def make_robot(
         gravity=jnp.asarray(arr(gravity, (3,), "gravity")),
         lower=jnp.asarray(lo),
         upper=jnp.asarray(hi),
-        velocity_limit=jnp.asarray(full(velocity_limit, np.inf)),
-        effort_limit=jnp.asarray(full(effort_limit, np.inf)),
+        velocity_limit=jnp.asarray(full(velocity_limit, np.inf, "velocity_limit")),
+        effort_limit=jnp.asarray(full(effort_limit, np.inf, "effort_limit")),
         frame_R=jnp.asarray(fR.reshape(nf, 3, 3)),
         frame_p=jnp.asarray(fp.reshape(nf, 3)),
         joint_names=tuple(joint_names),

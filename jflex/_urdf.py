@@ -55,9 +55,12 @@ def _attr_float(el, name, where, default=None):
             raise URDFError(f"{where}: missing attribute '{name}'")
         return default
     try:
-        return float(v)
+        x = float(v)
     except ValueError:
         raise URDFError(f"{where}: attribute '{name}' must be a number, got '{v}'") from None
+    if np.isnan(x):
+        raise URDFError(f"{where}: attribute '{name}' must be a number, got '{v}'")
+    return x
 
 
 def _link_inertia(link, fname):
@@ -228,6 +231,15 @@ def _from_element(root, fname, gravity) -> Robot:
         except ParameterError as exc:
             raise URDFError(str(exc)) from None
     lims = np.array(lims)
+    try:
+        return _make(fname, joint_names, link_names, parents, types, Rs, ps, axes, inertia, gravity, lims,
+                     frame_names, frame_parents, frame_T, roots[0])
+    except ParameterError as exc:
+        raise URDFError(f"{fname}: {exc}") from None
+
+
+def _make(fname, joint_names, link_names, parents, types, Rs, ps, axes, inertia, gravity, lims,
+          frame_names, frame_parents, frame_T, base_name):
     return make_robot(
         joint_names=joint_names,
         link_names=link_names,
@@ -246,5 +258,5 @@ def _from_element(root, fname, gravity) -> Robot:
         frame_parents=frame_parents,
         frame_R=np.stack([T[:3, :3] for T in frame_T]) if frame_T else None,
         frame_p=np.stack([T[:3, 3] for T in frame_T]) if frame_T else None,
-        base_name=roots[0],
+        base_name=base_name,
     )

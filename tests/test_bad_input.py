@@ -47,6 +47,13 @@ def test_urdf_errors_name_the_culprit(old, new, pattern):
         jflex.from_urdf_string(GOOD_URDF.replace(old, new, 1))
 
 
+def test_urdf_nan_or_inf_limits():
+    with pytest.raises(jflex.URDFError, match="j1.*velocity"):
+        jflex.from_urdf_string(GOOD_URDF.replace('velocity="2"', 'velocity="nan"'))
+    r = jflex.from_urdf_string(GOOD_URDF.replace('effort="10"', 'effort="inf"'))
+    assert np.isinf(r.effort_limit[0])
+
+
 def test_missing_urdf_file(tmp_path):
     with pytest.raises(jflex.URDFError, match="not found"):
         jflex.load_urdf(tmp_path / "nope.urdf")
