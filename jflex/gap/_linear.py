@@ -442,7 +442,10 @@ def fit_linear(lm: LinearModel, x0, train, free=None, starts=()):
             # FRF misfit has spurious minima at vanishing or huge damping
             u0 = np.clip(xs[free], -50, 50)
             width = np.where(np.arange(len(xs))[free] % (2 * len(lm.structure.springs) or 1) < len(lm.structure.springs), 3.0, 4.0)
-            sol = so.least_squares(fun, u0, method="trf", bounds=(u0 - width, u0 + width), max_nfev=15 * (1 + free.sum()))
+            # lsmr: no dense SVD of the Jacobian per step (that SVD dominated, and stalls when BLAS
+            # threads contend for shared cores)
+            sol = so.least_squares(fun, u0, method="trf", bounds=(u0 - width, u0 + width), tr_solver="lsmr",
+                                   max_nfev=15 * (1 + free.sum()))
             xs = xs.copy()
             xs[free] = sol.x
         r = residual(lm, xs, train)
