@@ -2,7 +2,8 @@
 flexible hub, flexible revolute joint) in the four variants F.L-R.H, F.L-F.H, F.L-F.H-F.J and
 F.L-R.H-F.J, under a constant revolute torque, +/- prismatic force steps and a brake.
 
-Usage: python experiments/seed001_rp_arm.py [configs/seed001_rp_arm.yaml] [--out DIR]
+Usage: python experiments/seed001_rp_arm.py [configs/seed001_rp_arm_quick.yaml] [--out DIR]
+(configs/seed001_rp_arm.yaml: two hub modes as in the paper, about ten times the CPU time)
 """
 
 import pathlib
@@ -115,7 +116,7 @@ def run(cfg, out):
 
 
 def main(argv=None):
-    return jflex.experiment_cli("seed001_rp_arm", HERE.parent / "configs" / "seed001_rp_arm.yaml", run, argv)
+    return jflex.experiment_cli("seed001_rp_arm", HERE.parent / "configs" / "seed001_rp_arm_quick.yaml", run, argv)
 
 
 if __name__ == "__main__":
