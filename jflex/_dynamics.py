@@ -262,11 +262,12 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
     return s.stack(qdd, _dtype())
 
 
-def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
+def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "crba"):
     """Joint accelerations (n,) from torques: ``qdd = M^-1 (tau - h)``.
 
-    ``method="aba"`` (default; see ``benchmarks/bench_dynamics.py`` for the measured choice) or
-    ``"crba"`` (mass matrix and Cholesky solve).
+    ``method="crba"`` (default: mass matrix and Cholesky solve, the faster of the two for the
+    7-joint Panda in ``benchmarks/bench_dynamics.py``, batches 1e3 and 1e5) or ``"aba"``
+    (articulated-body algorithm, O(n), better for long chains).
     """
     if method == "aba":
         return aba(robot, q, qd, tau, f_ext)

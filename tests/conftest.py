@@ -6,3 +6,14 @@ jax.config.update("jax_enable_x64", True)
 
 # Heavier cases run at a small size unless JFLEX_SLOW=1.
 SLOW = os.environ.get("JFLEX_SLOW", "0") == "1"
+
+
+def pytest_collection_modifyitems(config, items):
+    import pytest
+
+    if SLOW:
+        return
+    skip = pytest.mark.skip(reason="heavy case: set JFLEX_SLOW=1 to run it")
+    for item in items:
+        if "heavy" in item.keywords:
+            item.add_marker(skip)

@@ -161,12 +161,17 @@ def summarise(rows: list[dict]) -> dict:
 
 def markdown(summary: dict, rows: list[dict]) -> str:
     s = summary
+
+    def fmt(key, spec):
+        # a small bench can lack a whole family (no pairs, no nulls): say so instead of failing
+        return "n/a" if s.get(key) is None else format(s[key], spec)
+
     L = ["# gap-bench", "",
          f"{s['cases']} cases ({s['effect_cases']} with hidden effects, {s['null_cases']} null). "
-         f"Top-1 (effect and joint): **{s['top1']:.0%}**, top-1 effect only: {s['top1_effect']:.0%}, top-2: {s['top2']:.0%}; "
-         f"pairs with both in the top 3: {s['pair_top3'] if s['pair_top3'] is None else format(s['pair_top3'], '.0%')}; "
-         f"median shrink of the validation excess gap: **{s['median_shrink']:.0f} %**; false alarms on null cases: "
-         f"**{s['false_alarm_rate']:.0%}**; time per case: median {s['median_seconds']:.1f} s, max {s['max_seconds']:.1f} s.", "",
+         f"Top-1 (effect and joint): **{fmt('top1', '.0%')}**, top-1 effect only: {fmt('top1_effect', '.0%')}, top-2: {fmt('top2', '.0%')}; "
+         f"pairs with both in the top 3: {fmt('pair_top3', '.0%')}; "
+         f"median shrink of the validation excess gap: **{fmt('median_shrink', '.0f')} %**; false alarms on null cases: "
+         f"**{fmt('false_alarm_rate', '.0%')}**; time per case: median {s['median_seconds']:.1f} s, max {s['max_seconds']:.1f} s.", "",
          "| truth | n | top-1 | top-1 (effect) | top-2 | median shrink [%] |", "|---|---|---|---|---|---|"]
     for k, v in s["per_effect"].items():
         L.append(f"| {k} | {v['n']} | {v['top1']:.0%} | {v['top1_effect']:.0%} | {v['top2']:.0%} | {v['median_shrink']:.0f} |")
