@@ -25,47 +25,9 @@ from jflex import identify as idf
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "identify_seed003.yaml"
-G0 = -9.81
 
 
 # --- the seed-003 model (the construction of experiments/posture_modal.py) ----------------------
-def appendix_b_columns(q, qdd, a1, a2):
-    """Columns 1..15 of the thesis regressor (App. B) at zero velocity, (3, 15)."""
-    q1, q2, q3 = q
-    d1, d2, d3 = qdd
-    s, c = np.sin, np.cos
-    P = np.zeros((3, 15))
-    P[0, 0] = d1
-    P[0, 2] = 2 * a1 * d1 * c(q2)
-    P[0, 3] = -2 * a1 * d1 * s(q2)
-    P[0, 4] = d1 / 2 - d1 * c(2 * q2) / 2
-    P[0, 5] = -d2 * s(q2)
-    P[0, 6] = -d1 * s(2 * q2)
-    P[0, 7] = -d2 * c(q2)
-    P[0, 9] = d1 * (a2 * c(q3) + a2 * c(2 * q2 + q3) + 2 * a1 * c(q2 + q3))
-    P[0, 10] = -d1 * (a2 * s(q3) + a2 * s(2 * q2 + q3) + 2 * a1 * s(q2 + q3))
-    P[0, 11] = d1 / 2 - d1 * c(2 * q2 + 2 * q3) / 2
-    P[0, 12] = -(d2 + d3) * s(q2 + q3)
-    P[0, 13] = -d1 * s(2 * q2 + 2 * q3)
-    P[0, 14] = -(d2 + d3) * c(q2 + q3)
-    P[1, 1] = d2
-    P[1, 2] = -G0 * c(q2)
-    P[1, 3] = G0 * s(q2)
-    P[1, 5] = -d1 * s(q2)
-    P[1, 7] = -d1 * c(q2)
-    P[1, 8] = d2 + d3
-    P[1, 9] = 2 * a2 * d2 * c(q3) - G0 * c(q2 + q3) + a2 * d3 * c(q3)
-    P[1, 10] = G0 * s(q2 + q3) - 2 * a2 * d2 * s(q3) - a2 * d3 * s(q3)
-    P[1, 12] = -d1 * s(q2 + q3)
-    P[1, 14] = -d1 * c(q2 + q3)
-    P[2, 8] = d2 + d3
-    P[2, 9] = a2 * d2 * c(q3) - G0 * c(q2 + q3)
-    P[2, 10] = G0 * s(q2 + q3) - a2 * d2 * s(q3)
-    P[2, 12] = -d1 * s(q2 + q3)
-    P[2, 14] = -d1 * c(q2 + q3)
-    return P
-
-
 class Seed003:
     def __init__(self, path: pathlib.Path):
         cfg = jflex.load_yaml(path)
@@ -75,14 +37,8 @@ class Seed003:
         self.psi = np.asarray(cfg["base_parameters"], dtype=float)
         if self.psi.shape != (27,):
             raise jflex.ConfigError(f"{path}: base_parameters: expected 27 numbers (Table 3.3/3.6), got {self.psi.shape}")
-        rng = np.random.default_rng(0)
-        Ys, Ps = [], []
-        for _ in range(60):
-            q, qdd = rng.uniform(-np.pi, np.pi, 3), rng.normal(size=3)
-            Ys.append(np.asarray(jflex.regressor(self.robot0, q, np.zeros(3), qdd)))
-            Ps.append(appendix_b_columns(q, qdd, a1, a2))
         # Link parameters realising each base parameter (only their base combinations matter).
-        self.R = np.linalg.lstsq(np.concatenate(Ys), np.concatenate(Ps), rcond=None)[0]
+        self.R, _ = jflex.seed003_realisation_matrix(self.robot0, a1, a2)
         self.K = np.asarray(cfg["stiffness"], float)
         self.C = np.asarray(cfg["damping"], float)
         self.postures = np.radians(np.asarray(cfg["postures_deg"], float))

@@ -118,3 +118,7 @@ from ._lagrangian import (
 # identification (issue 5): equation-error and output-error fits, EMA helpers
 from . import identify as identify
 from . import gap as gap  # sim-to-real gap diagnosis (issue 6)
+from ._seed003 import (
+    appendix_b_columns as seed003_appendix_b_columns,
+    realisation_matrix as seed003_realisation_matrix,
+)
