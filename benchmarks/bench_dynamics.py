@@ -61,7 +61,7 @@ def bench_jflex(robot, q, qd, qdd, tau):
     for name, f in fns.items():
         # batches go through jflex.batched (cache-sized blocks, fusion off for these kernels);
         # a single state through jit(vmap)
-        jf = jflex.batched(f, batch_size=min(N, 1024), fuse=False) if N > 1 else jax.jit(jax.vmap(f))
+        jf = jflex.batched(f, batch_size=min(N, 4096), fuse=False) if N > 1 else jax.jit(jax.vmap(f))
         t0 = time.perf_counter()
         jax.block_until_ready(jf(q, qd, qdd, tau))
         compile_s[name] = time.perf_counter() - t0
