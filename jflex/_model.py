@@ -35,6 +35,19 @@ class Layout(NamedTuple):
     def nz(self) -> int:
         return len(self.state_names)
 
+    def indices(self, coords, where: str = "") -> tuple[int, ...]:
+        """Indices in ``x`` of coordinates given by name or index; an unknown name is a
+        :class:`ShapeError` that lists the model's coordinates (prefixed by ``where``)."""
+        out = []
+        for c in coords:
+            if isinstance(c, str):
+                if c not in self.coord_names:
+                    raise ShapeError(f"{where}unknown coordinate '{c}'; coordinates: {list(self.coord_names)}")
+                out.append(self.coord_names.index(c))
+            else:
+                out.append(int(c))
+        return tuple(out)
+
 
 class Model(eqx.Module):
     """Rigid robot + effects.
@@ -214,14 +227,7 @@ def linearize(model: Model, x0, *, hold: tuple[str, ...] | tuple[int, ...] = (),
     x0 = jnp.asarray(x0)
     zero = jnp.zeros_like(x0)
     z0 = initial_state(model)
-    held = set()
-    for h in hold:
-        if isinstance(h, str):
-            if h not in lay.coord_names:
-                raise ShapeError(f"linearize: unknown coordinate '{h}' in hold; coordinates: {list(lay.coord_names)}")
-            held.add(lay.coord_names.index(h))
-        else:
-            held.add(int(h))
+    held = set(lay.indices(hold, "linearize (hold): "))
     keep = tuple(i for i in range(lay.nx) if i not in held)
     idx = jnp.array(keep, dtype=int)
     embed = lambda base, sub: base.at[idx].set(sub)

@@ -154,17 +154,7 @@ def rayleigh_damping(model, x0, alpha, beta, coords=None) -> ViscousDamping:
     if float(alpha) < 0 or float(beta) < 0:
         raise ParameterError(f"rayleigh_damping: alpha and beta must be >= 0, got {alpha}, {beta}")
     lay = model.layout
-    if coords is None:
-        idx = list(range(lay.nx))
-    else:
-        idx = []
-        for c in coords:
-            if isinstance(c, str):
-                if c not in lay.coord_names:
-                    raise ShapeError(f"rayleigh_damping: unknown coordinate '{c}'; coordinates: {list(lay.coord_names)}")
-                idx.append(lay.coord_names.index(c))
-            else:
-                idx.append(int(c))
+    idx = list(range(lay.nx)) if coords is None else list(lay.indices(coords, "rayleigh_damping: "))
     lin = linearize(model, x0)
     ii = np.ix_(idx, idx)
     C = float(alpha) * np.asarray(lin.M)[ii] + float(beta) * np.asarray(lin.K)[ii]
@@ -173,10 +163,4 @@ def rayleigh_damping(model, x0, alpha, beta, coords=None) -> ViscousDamping:
 
 def coordinate_indices(model, names) -> tuple[int, ...]:
     """Indices of named coordinates in a model's ``x`` (named error for an unknown one)."""
-    lay = model.layout
-    out = []
-    for c in names:
-        if c not in lay.coord_names:
-            raise ShapeError(f"unknown coordinate '{c}'; coordinates: {list(lay.coord_names)}")
-        out.append(lay.coord_names.index(c))
-    return tuple(out)
+    return model.layout.indices(names)
