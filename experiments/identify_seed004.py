@@ -14,6 +14,7 @@ fractional fits show what those laws make of the same decay (compare with Table 
 from __future__ import annotations
 
 import pathlib
+import sys
 
 import jax.numpy as jnp
 import matplotlib
@@ -25,41 +26,20 @@ import scipy.linalg as sl
 
 import jflex
 from jflex import identify as idf
-from jflex.effects import FlexibleLink, Fractional, Hysteretic, KelvinVoigt
+from jflex.effects import Fractional, Hysteretic, KelvinVoigt
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "identify_seed004.yaml"
 
 
-class JointHold(jflex.effects.AbstractEffect):
-    """The PD servo of experiments/seed004_damping.py holding both joints (P part a potential)."""
-
-    kp: jnp.ndarray
-    kd: jnp.ndarray
-
-    def potential_energy(self, robot, slots, x):
-        return 0.5 * self.kp * jnp.sum(x[:2] ** 2)
-
-    def generalized_force(self, robot, slots, t, x, xd, z):
-        return jnp.zeros(slots.nx).at[:2].set(-self.kd * xd[:2])
+# The arm (and its joint servo) is the one of experiments/seed004_damping.py, reused as is.
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from seed004_damping import build as _build_arm  # noqa: E402
 
 
 def build(arm_cfg, law):
-    """The arm of experiments/seed004_damping.py: rigid link + hub, Rayleigh beam with ``law``."""
-    a = arm_cfg["arm"]
-    Lr, I1, IH = float(a["rigid_link_length_m"]), float(a["I_R0_plus_mH_Lr2_kg_m2"]), float(a["I_H_kg_m2"])
-    robot = jflex.make_robot(
-        joint_names=["joint1", "joint2"], link_names=["link1", "hub2"], parents=[-1, 0],
-        joint_types=["revolute", "revolute"], placement_R=np.stack([np.eye(3)] * 2),
-        placement_p=np.array([[0, 0, 0], [Lr, 0, 0.0]]), axis=[[0, 0, 1.0]] * 2,
-        inertia=np.array([[1e-3, 0, 0, 0, 1e-6, 0, I1, 0, 0, I1], [1e-3, 0, 0, 0, 1e-6, 0, IH, 0, 0, IH]]),
-        gravity=(0, 0, -9.81),
-    )
-    beam = jflex.make_beam(float(a["flexible_link_length_m"]), float(a["rho_A_kg_per_m"]), float(a["EI3_N_m2"]),
-                           int(a["modes"]), rotary_inertia=float(a["rho_I3_kg_m"]))
-    h = arm_cfg["joint_hold"]
-    hold = JointHold(jnp.asarray(float(h["kp_N_m_per_rad"])), jnp.asarray(float(h["kd_N_m_s_per_rad"])))
-    return jflex.Model(robot, [hold, FlexibleLink("hub2", beam, damping=law, name="beam")])
+    """The seed-004 arm with the beam damping ``law`` (model only)."""
+    return _build_arm(arm_cfg, law)[0]
 
 
 def static_deflection(cfg, arm_cfg, rng):
