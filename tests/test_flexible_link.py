@@ -120,3 +120,76 @@ def test_strain_output_is_minus_half_thickness_times_curvature():
     np.testing.assert_allclose(out(f"beam.curvature@{s}"), curv, rtol=1e-5)
     np.testing.assert_allclose(out(f"beam.strain@{s}"), -0.001 * curv, rtol=1e-5)
     np.testing.assert_allclose(out("beam.tip_deflection"), 0.01 - 0.002, rtol=1e-12)
+
+
+def _seed001_rigid_hub(extension=0.0, modes=2):
+    """Seed-001 structure with a rigid hub: revolute hub rod [0, 0.7] m, link (0.7 m, 0.785 kg/m,
+    EI 6.33 N m^2) sliding through it with free length 0.365 m + the prismatic coordinate."""
+    def rod(mu, a, b):
+        m, Izz = mu * (b - a), mu * (b**3 - a**3) / 3
+        return [m, m * (a + b) / 2, 0, 0, 1e-6, 0, Izz, 0, 0, Izz]
+
+    robot = jflex.make_robot(
+        joint_names=["rev", "pri"], link_names=["hub", "link"], parents=[-1, 0], joint_types=["revolute", "prismatic"],
+        placement_R=np.stack([np.eye(3)] * 2), placement_p=np.zeros((2, 3)), axis=[[0, 0, 1.0], [1.0, 0, 0]],
+        inertia=np.array([rod(2.1424, 0.0, 0.7), rod(0.785, 0.365, 1.065)]), gravity=(0, 0, 0),
+    )
+    eff = FlexibleLink("hub", jflex.make_beam(0.365, 0.785, 6.33, modes), root=(0.7, 0.0, 0.0), sliding_joint="pri",
+                       include_rigid=False, name="arm")
+    return jflex.Model(robot, [eff])
+
+
+def test_sliding_link_frequencies_follow_the_free_length_and_power_balance():
+    """The time-varying shapes must give, with the joints held, the clamped-free frequencies of the
+    current free length (0.365 m + extension), and the undamped sliding link's equations must
+    conserve T + V at any state: dE/dt = xd . dE/dx + xdd . dE/dxd = 0 (pointwise, no solve)."""
+    model = _seed001_rigid_hub()
+    lin = eqx.filter_jit(jflex.linearize)
+    for ext in (0.0, 0.1, -0.1):
+        x0 = jnp.array([0.3, ext, 0.0, 0.0])
+        w = _eig(lin(model, x0, hold=("rev", "pri")))
+        ref = jflex.clamped_free_frequencies(jflex.make_beam(0.365 + ext, 0.785, 6.33, 2))
+        np.testing.assert_allclose(w, np.asarray(ref), rtol=1e-6)
+
+    @eqx.filter_jit
+    def energy_rate(model, x, xd):
+        xdd, _ = jflex.model_forward_dynamics(model, 0.0, x, xd, jnp.zeros(model.nz), jnp.zeros(2))
+        E, dE = jax.jvp(lambda a, b: jflex.total_energy(model, a, b), (x, xd), (xd, xdd))
+        return E, dE, xdd
+
+    E, dE, xdd = energy_rate(model, jnp.array([0.3, 0.05, 2e-3, -3e-4]), jnp.array([1.2, 0.06, -0.05, 0.2]))
+    assert abs(float(dE)) < 1e-12 * float(E)  # E ~ 0.4 J, rates ~ 1-10 /s
+    # the sliding link is pulled outward: xdd of the prismatic coordinate has the centrifugal sign
+    assert float(xdd[1]) > 0
+
+
+def _load_seed001_experiment():
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).resolve().parents[1] / "experiments" / "seed001_rp_arm.py"
+    spec = importlib.util.spec_from_file_location("seed001_rp_arm", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.heavy  # ~40 s (compile of the sliding-link solve) on 2 cores
+def test_seed001_loading_keeps_the_link_within_its_stroke():
+    """Seed 001 with its loading (constant torque, +/- 65 mm/s ball-screw drive, brake at 1.8 s) at
+    low resolution (rigid hub, one link mode): the link must go out about 0.9 s x 65 mm/s and
+    come back, never beyond its 0.7 m length or into the hub, the drive must respect its 65 mm/s
+    limit and the brake must stop the arm. (Without the drive's speed limit and no-back-drive
+    reaction, the centrifugal pull ran the link out to ~1.1 m.)"""
+    E = _load_seed001_experiment()
+    cfg = jflex.load_yaml(__import__("pathlib").Path(E.__file__).parents[1] / "configs" / "seed001_rp_arm_quick.yaml")
+    cfg["link"]["modes"], cfg["t_end_s"], cfg["rtol"], cfg["atol"] = 1, 2.4, 1e-5, 1e-7
+    ts = np.linspace(0.0, 2.4, 241)
+    _, _, o, _, _ = E.simulate_variant(cfg, "F.L-R.H", ts, ("arm.length", "pri_d", "rev", "rev_d"))
+    l = o["arm.length"]
+    ld = cfg["loading"]
+    assert 0.3 < l.min() and l.max() < 0.7
+    np.testing.assert_allclose(l.max(), 0.365 + 0.065 * ld["prismatic_switch_s"], atol=5e-3)  # out ~58 mm at 65 mm/s
+    back = 0.365 + 0.065 * (2 * ld["prismatic_switch_s"] - ld["prismatic_stop_s"])  # and back in
+    assert abs(l[-1] - back) < 8e-3
+    assert np.max(np.abs(o["pri_d"])) < 0.0655
+    assert abs(o["rev_d"][-1]) < 0.02 and o["rev"][-1] > 0.5  # turned ~1.3 rad, then braked to rest
