@@ -39,7 +39,7 @@ def panda7():
     return robot, model, path
 
 
-def best_time(fn, reps=3):
+def best_time(fn, reps=5):
     best = np.inf
     for _ in range(reps):
         t0 = time.perf_counter()

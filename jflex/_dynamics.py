@@ -13,7 +13,7 @@ import jax.numpy as jnp
 
 from . import _scalar as s
 from . import _spatial as sp
-from ._robot import Robot, check_q
+from ._robot import PRISMATIC, Robot, check_q
 from ._tree import accumulate, consts, host, motion, support, walk
 
 _REFERENCES = ("local", "world", "local_world_aligned")
@@ -148,6 +148,17 @@ def gravity(robot: Robot, q):
     return rnea(robot, q, z, z)
 
 
+def _inertia_to_parent(robot, c, i, qi, ls, I):
+    """Body i's (composite) inertia about its parent's frame. For a revolute joint about +-z (every
+    DH joint, most URDF joints) the joint rotation is applied first, in closed form, and the
+    constant placement after it, where trace-time folding makes it nearly free."""
+    ax = c.axis[i]
+    if robot.joint_types[i] != PRISMATIC and ax.x == 0.0 and ax.y == 0.0 and ax.z in (1.0, -1.0):
+        cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if ax.z == 1.0 else -jnp.sin(qi))
+        return I.rotated_z(cs, sn).to_parent(c.Rpl[i], c.ppl[i])
+    return I.to_parent(ls.R[i], ls.p[i])
+
+
 def crba(robot: Robot, q):
     """Joint-space mass matrix by the composite rigid-body algorithm, shape (n, n), symmetric."""
     (q,) = _checked(robot, q=q)
@@ -159,7 +170,7 @@ def crba(robot: Robot, q):
     for i in reversed(range(n)):
         par = robot.parents[i]
         if par >= 0:
-            Ic[par] = Ic[par] + Ic[i].to_parent(ls.R[i], ls.p[i])
+            (Ic[par],) = s.barrier(Ic[par] + _inertia_to_parent(robot, c, i, q[i], ls, Ic[i]))
     M = [[0.0] * n for _ in range(n)]
     for i in range(n):
         sw, sv = motion(robot, c, i)
@@ -167,7 +178,7 @@ def crba(robot: Robot, q):
         M[i][i] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))
         j = i
         while robot.parents[j] >= 0:
-            Fn, Ff = s.force_to_parent(ls.R[j], ls.p[j], Fn, Ff)
+            Fn, Ff = s.barrier(*s.force_to_parent(ls.R[j], ls.p[j], Fn, Ff))
             j = robot.parents[j]
             sw, sv = motion(robot, c, j)
             M[i][j] = M[j][i] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))

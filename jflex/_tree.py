@@ -49,8 +49,20 @@ class RobotConsts(NamedTuple):
     gravity: s.V3
 
 
+def _snap(a):
+    """Rotation entries within 1e-14 of 0 or +-1 (cos(pi/2) = 6e-17 from a URDF's rpy) made exact,
+    so trace-time folding drops them; a change below float64 resolution at unit scale."""
+    if isinstance(a, jax.core.Tracer):
+        return a
+    a = np.array(a, dtype=float)
+    a[np.abs(a) < 1e-14] = 0.0
+    one = np.abs(np.abs(a) - 1.0) < 1e-14
+    a[one] = np.sign(a[one])
+    return a
+
+
 def consts(robot: Robot, inertia=True) -> RobotConsts:
-    R, p, ax = host(robot.placement_R), host(robot.placement_p), host(robot.axis)
+    R, p, ax = _snap(host(robot.placement_R)), host(robot.placement_p), _snap(host(robot.axis))
     n = robot.nq
     I = host(robot.inertia) if inertia else None
     return RobotConsts(
