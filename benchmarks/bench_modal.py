@@ -1,10 +1,12 @@
 """Posture sweeps: jflex (jit + vmap through jflex.sweep) against a NumPy/SciPy loop, one process,
 same inputs. Not a test: prints a table with throughputs and ratios.
 
-1. Modal analysis of a 3-joint flexible-joint arm (motors held) over N postures: jflex
+1. Modal analysis of a 3-joint flexible-joint arm (motors held) over N postures: jflex (both
+   eigen-solvers, ``solver="newton"`` and ``"eig"``)
    ``modal_analysis`` vs per posture Pinocchio CRBA + gravity derivatives and
    ``scipy.linalg.eig(A, B)`` of seed 003 Eq. 4.13.
-2. Tool FRFs (3x3 receptance) over N postures x 512 frequencies: jflex ``frf`` (direct and modal)
+2. Tool FRFs (3x3 receptance) over N postures x 512 frequencies: jflex ``frf`` (direct; modal with
+   the ``"newton"`` and ``"eig"`` eigen-solvers)
    vs per posture ``numpy.linalg.solve`` over the 512 frequencies and ``J G J^T``.
 
     python benchmarks/bench_modal.py [--modal-n 100000] [--frf-n 10000] [--host-devices 1]
@@ -115,41 +117,39 @@ print(f"jax {jax.__version__}, devices {jax.devices()}")
 # ---- 1. modal analysis ----------------------------------------------------------------------
 N = args.modal_n
 Q = rng.uniform(lo, hi, (N, 3))
-fn = lambda q: jflex.modal_analysis(model, q, hold="actuated")
-warm, t_c = timed(lambda: jflex.sweep(fn, Q[: args.chunk], chunk_size=args.chunk, progress=False))
-# sweep compiles per call; time the steady state by a second call of the same chunk size
-t0 = time.perf_counter()
-vfn = jax.jit(jax.vmap(fn))
-_ = jax.block_until_ready(vfn(Q[: args.chunk]).frequency)
-t_compile = time.perf_counter() - t0
-res = {}
-
-
-def jflex_modal():
-    out = [vfn(Q[s : s + args.chunk]) for s in range(0, N - N % args.chunk, args.chunk)]
-    return [o.frequency for o in out]
-
-
-_, t_j = timed(jflex_modal)
-n_j = N - N % args.chunk
-_, t_sweep = timed(lambda: jflex.sweep(fn, Q, chunk_size=args.chunk, progress=True, label="jflex.sweep modal"))
 nb = N if args.baseline_n == 0 else min(N, args.baseline_n)
 t0 = time.perf_counter()
 ref = [scipy_modal(q) for q in Q[:nb]]
 t_s = time.perf_counter() - t0
 f_ref = np.array([x[0] for x in ref])
-f_j = np.asarray(vfn(Q[:nb]).frequency) if nb <= args.chunk else np.asarray(warm.frequency)[: min(nb, args.chunk)]
-m = min(len(f_j), nb)
-err = np.max(np.abs(f_j[:m] - f_ref[:m]) / f_ref[:m])
-rows.append(("modal, 3-joint flexible, per posture", N, t_s / nb, t_j / n_j, t_sweep / N, err, t_compile))
+for solver in ("newton", "eig"):
+    fn = lambda q, solver=solver: jflex.modal_analysis(model, q, hold="actuated", solver=solver)
+    t0 = time.perf_counter()
+    vfn = jax.jit(jax.vmap(fn))
+    _ = jax.block_until_ready(vfn(Q[: args.chunk]).frequency)
+    t_compile = time.perf_counter() - t0
+
+    def jflex_modal():
+        out = [vfn(Q[s : s + args.chunk]) for s in range(0, N - N % args.chunk, args.chunk)]
+        return [o.frequency for o in out]
+
+    _, t_j = timed(jflex_modal)
+    n_j = N - N % args.chunk
+    # the whole N through jflex.sweep: chunked, progress, host copies, its own compile included
+    res = {}
+    _, t_sweep = timed(lambda: res.setdefault("f", jflex.sweep(fn, Q, chunk_size=args.chunk, progress=True,
+                                                               label=f"jflex.sweep modal ({solver})").frequency))
+    f_j = res["f"][:nb]
+    err = np.max(np.abs(f_j - f_ref) / f_ref)
+    rows.append((f"modal ({solver}), 3-joint flexible, per posture", N, t_s / nb, t_j / n_j, t_sweep / N, err, t_compile))
 
 # ---- 2. tool FRFs ----------------------------------------------------------------------------
 N2, nf = args.frf_n, args.n_freq
 Q2 = rng.uniform(lo, hi, (N2, 3))
 w = 2 * np.pi * np.linspace(0.5, 60.0, nf)
 ch2 = max(1, min(args.chunk, 2_000_000 // nf // 9))
-for method in ("modal", "direct"):
-    g = jax.jit(jax.vmap(lambda q: jflex.frf(model, q, w, hold="actuated", frame="tool", method=method)))
+for method, solver in (("modal", "newton"), ("modal", "eig"), ("direct", "eig")):
+    g = jax.jit(jax.vmap(lambda q: jflex.frf(model, q, w, hold="actuated", frame="tool", method=method, solver=solver)))
     t0 = time.perf_counter()
     jax.block_until_ready(g(Q2[:ch2]))
     t_compile = time.perf_counter() - t0
@@ -164,14 +164,14 @@ for method in ("modal", "direct"):
     _, t_j = timed(run)
     n_j = N2 - N2 % ch2
     nb2 = N2 if args.baseline_n == 0 else min(N2, args.baseline_n)
-    if method == "modal":
+    if solver == "newton":
         t0 = time.perf_counter()
         Gref = [scipy_frf(q, w) for q in Q2[:nb2]]
         t_s2 = time.perf_counter() - t0
     Gj = np.asarray(g(Q2[:ch2]))
     m = min(ch2, nb2)
     err = max(np.max(np.abs(Gj[i] - Gref[i])) / np.max(np.abs(Gref[i])) for i in range(m))
-    rows.append((f"tool FRF 3x3 x {nf} freqs ({method}), per posture", N2, t_s2 / nb2, t_j / n_j, float("nan"), err, t_compile))
+    rows.append((f"tool FRF 3x3 x {nf} freqs ({method}, {solver}), per posture", N2, t_s2 / nb2, t_j / n_j, float("nan"), err, t_compile))
 
 print()
 print(f"{'case':48s} {'N':>7s} {'SciPy us':>10s} {'jflex us':>10s} {'ratio':>7s} {'sweep us':>9s} {'max rel diff':>12s} {'compile s':>9s}")

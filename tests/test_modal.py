@@ -159,3 +159,73 @@ def test_bad_kind_or_method():
         frf_matrices(M, C, K, [1.0], kind="compliance")
     with pytest.raises(jflex.ShapeError, match="method"):
         frf_matrices(M, C, K, [1.0], method="fast")
+
+
+# ---- solver="newton": Newton's method from the undamped modes ---------------------------------
+
+
+def _light_system(n, seed):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n))
+    M = A @ A.T + n * np.eye(n)
+    B = rng.normal(size=(n, n))
+    K = 100.0 * (B @ B.T + n * np.eye(n))
+    D = rng.normal(size=(n, n))
+    C = 0.02 * (D @ D.T) + 1e-3 * K  # non-proportional, a few % damping
+    return M, C, K
+
+
+@pytest.mark.parametrize("n,seed", [(1, 0), (3, 1), (6, 2), (6, 3)])
+def test_newton_solver_matches_scipy_eig(n, seed):
+    M, C, K = _light_system(n, seed)
+    Z = np.zeros((n, n))
+    lam = sla.eig(-np.block([[K, Z], [Z, -M]]), np.block([[C, M], [M, Z]]), right=False)
+    ref = np.sort_complex(lam[lam.imag > 0])
+    md = modes(M, C, K, solver="newton")
+    got = np.asarray(md.eigenvalue)
+    assert np.allclose(np.sort_complex(got), ref, rtol=1e-10)
+    me = modes(M, C, K)
+    assert np.allclose(md.frequency, me.frequency, rtol=1e-10)
+    assert np.allclose(md.damping_ratio, me.damping_ratio, rtol=1e-8, atol=1e-12)
+    assert np.allclose(md.shape, me.shape, atol=1e-8)
+    w = np.linspace(0.0, 1.5 * float(np.max(md.frequency)) * 2 * np.pi, 64)
+    T = np.random.default_rng(seed).normal(size=(3, n))
+    inv = np.stack([np.linalg.inv(K - wi**2 * M + 1j * wi * C) for wi in w])
+    H = np.asarray(frf_matrices(M, C, K, w, T=T, method="modal", solver="newton"))
+    assert np.allclose(H, np.einsum("ij,fjk,lk->fil", T, inv, T), rtol=1e-8, atol=1e-14 * np.abs(inv).max())
+
+
+def test_newton_solver_gradients_match_finite_differences():
+    import jax
+
+    M, C, K = _light_system(3, 5)
+
+    def f(s):
+        md = modes(M * s[0], C * s[1], K * s[2], solver="newton")
+        return jax.numpy.sum(md.frequency) + 10 * jax.numpy.sum(md.damping_ratio) + jax.numpy.abs(md.shape[0, 1])
+
+    s0 = np.array([1.0, 1.0, 1.0])
+    g = np.asarray(jax.grad(f)(s0))
+    h = 1e-6
+    fd = np.array([(f(s0 + h * e) - f(s0 - h * e)) / (2 * h) for e in np.eye(3)])
+    assert np.allclose(g, fd, rtol=1e-5, atol=1e-8)
+
+
+def test_default_solver_is_differentiable():
+    import jax
+
+    M, C, K = _light_system(3, 6)
+    f = lambda s: jax.numpy.sum(modes(M, C * s, K).damping_ratio) + jax.numpy.abs(modes(M, C * s, K).shape[1, 0])
+    h = 1e-6
+    assert abs(float(jax.grad(f)(1.0)) - (f(1 + h) - f(1 - h)) / (2 * h)) < 1e-5 * max(1.0, abs(float(jax.grad(f)(1.0))))
+
+
+def test_newton_solver_refuses_overdamped_modes():
+    M, K = np.eye(2), np.diag([100.0, 400.0])
+    C = np.diag([30.0, 1.0])  # first mode overdamped (zeta = 1.5)
+    with pytest.raises(Exception, match="solver='eig'"):
+        np.asarray(modes(M, C, K, solver="newton").frequency)
+    md = modes(M, C, K)  # the default handles it
+    assert np.isfinite(np.asarray(md.frequency)).all()
+    with pytest.raises(jflex.JFlexError, match="solver"):
+        modes(M, C, K, solver="qr")

@@ -1,6 +1,7 @@
 """Linear analyses at a posture: modal analysis, MAC and mode tracking, FRFs, stability lobes."""
 
 from ._common import expand_posture as expand_posture, resolve_hold as resolve_hold, linearization as linearization
+from ._qep import qep_newton as qep_newton
 from ._modal import Eigen as Eigen, Modes as Modes, eigen as eigen, modes as modes, modal_analysis as modal_analysis
 from ._frf import (
     frf as frf,

@@ -15,10 +15,20 @@ all 2n eigenpairs (seed 000's expansion for non-proportional damping), and a mod
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
+from .._errors import ShapeError
 from .._model import Model
 from ._common import linearization, tool_jacobian
+from ._qep import qep_newton
+
+SOLVERS = ("eig", "newton")
+
+
+def check_solver(solver):
+    if solver not in SOLVERS:
+        raise ShapeError(f"solver must be one of {SOLVERS}, got {solver!r}")
 
 
 class Eigen(eqx.Module):
@@ -61,20 +71,30 @@ class Modes(eqx.Module):
         )
 
 
-def eigen(M, C, K) -> Eigen:
-    """All 2n eigenpairs of ``(lambda^2 M + lambda C + K) psi = 0`` from the state matrix.
+def eigen(M, C, K, *, solver: str = "eig") -> Eigen:
+    """All 2n eigenpairs of ``(lambda^2 M + lambda C + K) psi = 0``.
 
-    **Arguments:** ``M`` (n, n) positive definite, ``C``, ``K`` (n, n).
+    **Arguments:** ``M`` (n, n) positive definite, ``C``, ``K`` (n, n); ``solver``: ``"eig"``
+    (the state matrix through ``jnp.linalg.eig``: any damping) or ``"newton"`` (Newton's method
+    from the undamped modes, :func:`jflex.linear.qep_newton`: underdamped modes only, several
+    times faster over posture batches; the conjugate halves are the complex conjugates).
 
     **Returns:** :class:`Eigen`.
     """
+    check_solver(solver)
     M, C, K = (jnp.asarray(A, dtype=float) for A in (M, C, K))
     n = M.shape[0]
-    MiK = jnp.linalg.solve(M, K)
-    MiC = jnp.linalg.solve(M, C)
-    A = jnp.block([[jnp.zeros((n, n)), jnp.eye(n)], [-MiK, -MiC]])
-    lam, V = jnp.linalg.eig(A)
-    psi = V[:n]
+    if solver == "newton":
+        lam, psi = qep_newton(M, C, K)
+        lam, psi = jnp.concatenate([lam, lam.conj()]), jnp.concatenate([psi, psi.conj()], axis=1)
+    else:
+        MiK = jnp.linalg.solve(M, K)
+        MiC = jnp.linalg.solve(M, C)
+        A = jnp.block([[jnp.zeros((n, n)), jnp.eye(n)], [-MiK, -MiC]])
+        # eigenvector derivatives are gauge-dependent in general; every consumer here (modal
+        # expansion, normalised shapes) is invariant to each eigenvector's scale, so they are valid
+        lam, V = jax.lax.linalg.eig(A, compute_left_eigenvectors=False, enable_eigvec_derivs=True)
+        psi = V[:n]
     a = 2 * lam * jnp.einsum("ir,ij,jr->r", psi, M, psi) + jnp.einsum("ir,ij,jr->r", psi, C, psi)
     return Eigen(lam, psi, a)
 
@@ -87,19 +107,20 @@ def _normalise(psi):
     return psi / pivot, pivot[0]
 
 
-def modes(M, C, K, *, names: tuple[str, ...] = ()) -> Modes:
+def modes(M, C, K, *, names: tuple[str, ...] = (), solver: str = "eig") -> Modes:
     """Natural frequencies, damping ratios, mode shapes and modal masses of ``M x'' + C x' + K x = 0``.
 
     **Arguments:** ``M`` (n, n) positive definite [kg, kg m^2], ``C`` (n, n), ``K`` (n, n).
 
     **Returns:** :class:`Modes` with n modes sorted by natural frequency. Of each conjugate
     pair the eigenvalue with Im >= 0 is kept; an overdamped mode shows up as a real eigenvalue
-    with zeta = 1, a rigid-body mode as f = 0, zeta = 0.
+    with zeta = 1, a rigid-body mode as f = 0, zeta = 0 (``solver="eig"``; ``"newton"`` is for
+    underdamped modes and raises otherwise, see :func:`eigen`).
     """
-    e = eigen(M, C, K)
+    e = eigen(M, C, K, solver=solver)
     n = e.shape.shape[0]
     # conjugate pairs: the n eigenvalues with the largest imaginary parts are the Im >= 0 halves
-    top = jnp.argsort(-e.eigenvalue.imag)[:n]
+    top = jnp.argsort(-e.eigenvalue.imag)[:n] if solver == "eig" else jnp.arange(n)
     lam = e.eigenvalue[top]
     order = jnp.argsort(jnp.abs(lam))
     top = top[order]
@@ -122,6 +143,7 @@ def modal_analysis(
     frame=None,
     reference: str = "local_world_aligned",
     components: str = "linear",
+    solver: str = "eig",
 ) -> Modes:
     """Modal analysis of ``model`` linearised at a posture (seed 003 Eqs. 4.4-4.13).
 
@@ -136,12 +158,14 @@ def modal_analysis(
     - ``frame``: optional frame (e.g. ``"tool"``) at which to express the mode shapes through
       its Jacobian; ``reference`` and ``components`` (``"linear"``, ``"angular"``, ``"full"``)
       as in :func:`jflex.jacobian`.
+    - ``solver``: ``"eig"`` (any damping) or ``"newton"`` (underdamped modes, several times
+      faster in posture sweeps; raises where it does not converge), see :func:`eigen`.
 
     **Returns:** :class:`Modes`; frequencies in Hz, damping ratios, complex shapes over the
     kept coordinates and (if ``frame``) at the frame. Jit- and vmap-compatible over postures.
     """
     x0, lin = linearization(model, posture, hold)
-    out = modes(lin.M, lin.C, lin.K, names=lin.names)
+    out = modes(lin.M, lin.C, lin.K, names=lin.names, solver=solver)
     if frame is not None:
         J = tool_jacobian(model, x0, lin.keep, frame, reference, components)
         out = eqx.tree_at(lambda m: m.tool_shape, out, J @ out.shape, is_leaf=lambda x: x is None)
