@@ -174,23 +174,48 @@ class Problem:
         new_idx = []
         if cand.effect in ("hysteretic_damping", "fractional_damping"):
             i = next(i for i, s in enumerate(springs) if s.kind == "joint" and s.where == cand.joint)
-            best = None
-            alphas = L.ALPHAS if cand.effect == "fractional_damping" else (0.5,)
-            for a in alphas:
+            law = "hysteretic" if cand.effect == "hysteretic_damping" else "fractional"
+            tried = {}
+
+            def fit_alpha(a):
                 sp = list(springs)
-                sp[i] = dataclasses.replace(sp[i], law="hysteretic" if cand.effect == "hysteretic_damping" else "fractional", alpha=a)
+                sp[i] = dataclasses.replace(sp[i], law=law, alpha=round(float(a), 3))
                 lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
-                lm2._cache = {}  # geometry unchanged, but keep it simple and correct
+                lm2._cache = lm._cache  # same geometry and postures: the matrices carry over
                 x2 = np.array(x, float)
                 w = 2 * np.pi * self._ref_freq()
-                k = np.exp(x2[i])
-                c = np.exp(x2[S + i])
-                # the same loss at the reference frequency: eta = w c / k, c_frac = w c / w^alpha
-                x2[S + i] = np.log(w * c / k) if cand.effect == "hysteretic_damping" else np.log(w * c / w**a)
-                xf, cost = L.fit_linear(lm2, x2, self.ftrain)
-                if best is None or cost < best[0]:
-                    best = (cost, lm2, xf)
-            return best[1], best[2]
+                k, c = np.exp(x2[i]), np.exp(x2[S + i])
+                # the same loss at the reference frequency (eta = w c / k, c_frac = w c / w^alpha) is
+                # only a guess (the spring's own mode may lie elsewhere): scan the new damping
+                # coefficient around it, then fit everything from the best (no peaks phase: the
+                # picked peaks' half-power damping is what a damping law must not chase)
+                c0 = np.log(w * c / k) if law == "hysteretic" else np.log(w * c / w**a)
+                best0 = None
+                for dc in np.arange(-3.0, 3.01, 0.5):
+                    x2[S + i] = c0 + dc
+                    r = L.residual(lm2, x2, self.ftrain, peaks=False)
+                    if best0 is None or r @ r < best0[0]:
+                        best0 = (float(r @ r), x2.copy())
+                xf, cost = L.fit_linear(lm2, best0[1], self.ftrain, peaks_first=False)
+                tried[float(a)] = (cost, lm2, xf)
+                return cost
+
+            if law == "hysteretic":
+                fit_alpha(0.5)
+            else:
+                for a in L.ALPHAS:
+                    fit_alpha(a)
+                # refine the order: the vertex of a parabola through the best grid point and its neighbours
+                al = sorted(tried)
+                kb = int(np.argmin([tried[a][0] for a in al]))
+                kb = min(max(kb, 1), len(al) - 2)
+                xa = np.array(al[kb - 1:kb + 2])
+                ya = np.log(np.array([tried[a][0] for a in xa]))
+                cpar = np.polyfit(xa, ya, 2)
+                if cpar[0] > 0:
+                    fit_alpha(float(np.clip(-cpar[1] / (2 * cpar[0]), 0.1, 0.95)))
+            cost, lm2, xf = min(tried.values(), key=lambda t: t[0])
+            return lm2, xf
         if cand.effect == "payload":
             st2 = L.LinearStructure(tuple(springs), True)
             lm2 = L.LinearModel(self.robot, st2, self.case.tool_frame)
@@ -205,31 +230,66 @@ class Problem:
             new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1)]
         sp = springs + new
         lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
-        # starting stiffnesses: place the new modes near the measured modes the model misses
+        # starting stiffnesses: the new spring(s) alone would put a mode at f_t; f_t is scanned over a
+        # log grid from below the measured band to well above it (a compliance whose modes lie
+        # above the band shows only as a posture-dependent static softening), both springs of a
+        # pair together and each alone stiff, keeping the starts with the lowest misfit. (One start
+        # at the frequency of the largest misfit put link modes far below the band, from where the
+        # bounded fit could not return.)
         P = lm2.mats(self._ref_posture())
-        targets = self._unmatched_freqs(lm, x) or [self._ref_freq()]
-        starts = []
-        for ft in targets[:1]:
+        f_lo, f_hi = self._freq_band()
+        targets = list(np.geomspace(f_lo, 3.0 * f_hi, 12)) + self._unmatched_freqs(lm, x)[:1]
+        meff = [max(P.M[S + s, S + s], 1e-9) for s in range(len(new))]
+
+        def start(fts):
+            nk = [np.log((2 * np.pi * ft) ** 2 * m) for ft, m in zip(fts, meff)]
+            nc = [np.log(2 * 0.02 * np.sqrt(np.exp(k) * m)) for k, m in zip(nk, meff)]
+            return np.concatenate([ks, nk, cs, nc, pay])
+
+        grid = [[ft] * len(new) for ft in targets]
+        if len(new) == 2:
+            grid += [[ft, 10 * f_hi] for ft in targets] + [[10 * f_hi, ft] for ft in targets]
+        scored = []
+        for fts in grid:
+            xs = start(fts)
+            r = L.residual(lm2, xs, self.ftrain, peaks=False)
+            scored.append((float(r @ r), len(scored), xs))
+        scored.sort(key=lambda t: t[:2])
+        starts = [t[2] for t in scored[:2]]
+        # and the new modes near the measured mode the model misses most (where the nominal fit is
+        # far off, the grid's misfit says little: a peaks phase first sorts the modes out)
+        P0 = P.M[:S, :S]
+        for ft in self._unmatched_freqs(lm, x)[:1]:
             for scale in (0.6, 1.6):
                 nk, nc = [], []
                 for s in range(len(new)):
                     ii = S + s
-                    meff = max(P.M[ii, ii] - P.M[ii, :S] @ np.linalg.solve(P.M[:S, :S], P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
-                    k = scale * (2 * np.pi * ft) ** 2 * meff * (1.0 + 0.5 * s)
+                    me = max(P.M[ii, ii] - P.M[ii, :S] @ np.linalg.solve(P0, P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
+                    k = scale * (2 * np.pi * ft) ** 2 * me * (1.0 + 0.5 * s)
                     nk.append(np.log(k))
-                    nc.append(np.log(2 * 0.02 * np.sqrt(k * meff)))
+                    nc.append(np.log(2 * 0.02 * np.sqrt(k * me)))
                 starts.append(np.concatenate([ks, nk, cs, nc, pay]))
-        # warm start: first the new spring(s) alone, the nominal ones held; then everything
+        # from each start: first the new spring(s) alone, the nominal ones held; then everything
         Sn = len(sp)
         free = np.zeros(len(starts[0]), bool)
         free[S:Sn] = True
         free[Sn + S:2 * Sn] = True
-        x1, _ = L.fit_linear(lm2, starts[0], self.ftrain, free=free, starts=starts[1:])
-        xf, _ = L.fit_linear(lm2, x1, self.ftrain)
-        return lm2, xf
+        best = None
+        for x0 in starts:
+            x1, _ = L.fit_linear(lm2, x0, self.ftrain, free=free)
+            xf, cost = L.fit_linear(lm2, x1, self.ftrain, peaks_first=False)
+            if best is None or cost < best[0]:
+                best = (cost, xf)
+        return lm2, best[1]
 
     def _ref_posture(self):
         return self.ftrain[0].arrays["q0"]
+
+    def _freq_band(self):
+        fs = []
+        for d in self.ftrain:
+            fs += list(np.asarray(d.arrays["freq"], float))
+        return (float(min(fs)), float(max(fs))) if fs else (1.0, 100.0)
 
     def _ref_freq(self):
         fs = []
@@ -303,13 +363,22 @@ def _mad_sigma(x):
     return 1.4826 * np.median(np.abs(x - np.median(x)))
 
 
+def _mean_of(rep, x) -> float:
+    """sqrt(R) when the record ``x`` is the mean of its ``R`` repeats (its noise is that of one
+    repeat over sqrt(R)), else 1 (a record of its own)."""
+    R = rep.shape[0]
+    if R > 1 and np.allclose(rep.mean(axis=0), x, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(x)) or 1.0)):
+        return float(np.sqrt(R))
+    return 1.0
+
+
 def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
     """NRMSE [%] that noise alone leaves, per validation data set.
 
-    Torque: from ``tau_repeats`` when recorded, else the robust (MAD) spread of the residual's
+    Torque: from ``tau_repeats`` when recorded (over sqrt(R) when ``tau`` is their mean), else the robust (MAD) spread of the residual's
     second difference, ``sigma = MAD(d2 r) / sqrt(6)`` (white noise: var(d2) = 6 sigma^2; the
     smooth model error barely enters, and the median ignores the few jumps at reversals).
-    FRF: ``H_repeats`` when recorded, else the same on the real and imaginary parts of the
+    FRF: ``H_repeats`` when recorded (likewise), else the same on the real and imaginary parts of the
     residual along frequency. Modal tables: ``noise.modal_frequency_pct`` of the case (default 1).
     """
     out = {}
@@ -320,7 +389,7 @@ def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
             s = next(s for s in problem.tval if s.name == name)
             if "tau_repeats" in d.arrays:
                 rep = d.arrays["tau_repeats"]
-                sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale
+                sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale / _mean_of(rep, d.arrays["tau"])
             else:
                 e = r["resid"]
                 d2 = e[2:] - 2 * e[1:-1] + e[:-2]
@@ -331,8 +400,12 @@ def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
             ok = L.frf_entries(a["H"])
             scale = L.frf_scale(a["H"])
             if "H_repeats" in a:
-                sig = np.sqrt(np.mean(np.abs(a["H_repeats"] - a["H_repeats"].mean(axis=0)) ** 2, axis=(0, 1)))
-                out[name] = float(np.sqrt(np.mean((sig[ok] / scale[ok]) ** 2)) * 100)
+                rep = a["H_repeats"]
+                # per-entry noise variance of one record (unbiased), summed over frequency and set
+                # against the FRF's energy: the measure of the gap itself
+                var = np.sum(np.abs(rep - rep.mean(axis=0)) ** 2, axis=0) / max(rep.shape[0] - 1, 1)
+                var = var / _mean_of(rep, a["H"]) ** 2
+                out[name] = float(np.sqrt(np.sum(var[:, ok]) / np.sum(np.abs(a["H"][:, ok]) ** 2)) * 100)
             else:
                 e = r["err"][:, ok] / scale[ok]
                 d2 = e[2:] - 2 * e[1:-1] + e[:-2]

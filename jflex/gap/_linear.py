@@ -379,14 +379,19 @@ def frf_peaks(freq, H, prominence=0.03):
 
 
 PEAK_WEIGHT = 1.0  # FRF training sets also enter through their picked peaks (smooth in log k)
+RECENTRE = 2  # times the FRF phase may move its box to a stiffness that ended on the edge
 FIT_STRIDE = 4  # every 3rd frequency of a measured FRF enters the fit (peaks stay resolved)
 
 
-def residual(lm: LinearModel, x, train, peaks_only: bool = False) -> np.ndarray:
+def residual(lm: LinearModel, x, train, peaks_only: bool = False, peaks: bool = True) -> np.ndarray:
     """Stacked fitting residual of the training FRF and modal sets: FRFs as the complex error
-    normalised by each entry's RMS (the measure the gap is judged by; a log-ratio misfit was
-    tried and preferred sharp misplaced peaks), modal tables as relative frequency errors plus
-    a weighted damping error."""
+    normalised by the set's RMS magnitude over its entries, i.e. the FRF NRMSE the gap is judged
+    by (a log-ratio misfit was tried and preferred sharp misplaced peaks; a per-entry
+    normalisation let the small cross entries outweigh the dominant ones, so a fit could lower
+    its cost while the judged gap doubled), modal tables as relative frequency errors plus a
+    weighted damping error. FRF sets also enter through their picked peaks (``peaks``; alone
+    with ``peaks_only``): smooth in log k, but the half-power damping of overlapping peaks is
+    biased, so the final phase of :func:`fit_linear` leaves them out."""
     out = []
     for d in train:
         a = d.arrays
@@ -397,12 +402,12 @@ def residual(lm: LinearModel, x, train, peaks_only: bool = False) -> np.ndarray:
             s = frf_scale(a["H"])
             ok = frf_entries(a["H"])
             Hm, H = Hm[:, ok], H[:, ok]
-            e = (Hm - H) / s[ok] / np.sqrt(H.size)
+            e = (Hm - H) / np.sqrt(np.mean(s[ok] ** 2)) / np.sqrt(H.size)
             if peaks_only:
                 e = e[:0]
-            if "_peaks" not in a:
+            if peaks and "_peaks" not in a:
                 a["_peaks"] = frf_peaks(a["freq"], a["H"])
-            pf, pz = a["_peaks"]
+            pf, pz = a["_peaks"] if peaks else ((), ())
             if len(pf):
                 fm, zm = lm.modes(x, a["q0"])
                 idx, ef, assigned = match_modes(fm, pf, return_assigned=True)
@@ -420,36 +425,54 @@ def residual(lm: LinearModel, x, train, peaks_only: bool = False) -> np.ndarray:
     return np.where(np.isfinite(r), r, 1e3)
 
 
-def fit_linear(lm: LinearModel, x0, train, free=None, starts=()):
+def fit_linear(lm: LinearModel, x0, train, free=None, starts=(), peaks_first: bool = True):
     """Nonlinear least squares (log parameters) from ``x0`` and extra starting points ``starts``;
-    ``free`` masks the parameters to fit (the rest held)."""
+    ``free`` masks the parameters to fit (the rest held); ``peaks_first``: a first phase on the
+    picked peaks alone (for starts whose modes may lie far from the measured ones)."""
     x0 = np.asarray(x0, float)
     free = np.ones_like(x0, bool) if free is None else np.asarray(free, bool)
     best = None
-    phases = (True, False) if any(d.kind == "frf" for d in train) else (False,)
+    phases = (True, False) if peaks_first and any(d.kind == "frf" for d in train) else (False,)
     for xs in (x0, *starts):
         xs = np.asarray(xs, float)
-        # two phases: the picked peaks alone (smooth in log k), then the whole complex FRF
+        # the box is centred on the start for both phases: re-centred on the peaks phase's result,
+        # it trapped the FRF phase where the biased peak damping had pushed a parameter to its edge
+        u0 = np.clip(xs[free], -50, 50)
+        # two phases: the picked peaks alone (smooth in log k), then the whole complex FRF without
+        # the peaks (their half-power damping is biased where peaks overlap)
         for peaks_only in phases:
             def fun(u, xs=xs, po=peaks_only):
                 x = xs.copy()
                 x[free] = u
-                return residual(lm, x, train, po)
+                return residual(lm, x, train, po, peaks=po)
 
             if not free.any():
                 break
             # log parameters stay within a factor e^3 (stiffness) / e^4 (damping) of the start: the
             # FRF misfit has spurious minima at vanishing or huge damping
-            u0 = np.clip(xs[free], -50, 50)
             width = np.where(np.arange(len(xs))[free] % (2 * len(lm.structure.springs) or 1) < len(lm.structure.springs), 3.0, 4.0)
             # lsmr: no dense SVD of the Jacobian per step (that SVD dominated, and stalls when BLAS
             # threads contend for shared cores)
-            sol = so.least_squares(fun, u0, method="trf", bounds=(u0 - width, u0 + width), tr_solver="lsmr",
-                                   max_nfev=15 * (1 + free.sum()))
-            xs = xs.copy()
-            xs[free] = sol.x
-        r = residual(lm, xs, train)
+            centre = u0
+            for _ in range(1 + (0 if peaks_only else RECENTRE)):
+                lo, hi = centre - width, centre + width
+                sol = so.least_squares(fun, np.clip(xs[free], lo, hi), method="trf", bounds=(lo, hi), tr_solver="lsmr",
+                                       max_nfev=15 * (1 + free.sum()))
+                xs = xs.copy()
+                xs[free] = sol.x
+                # a parameter that stops on the box's edge (a new compliance the nominal springs had
+                # absorbed: they stiffen as it softens; a lightly damped new mode) moves the box
+                # there, a bounded number of times (spurious minima at vanishing or huge damping)
+                edge = (np.abs(sol.x - lo) < 1e-6) | (np.abs(sol.x - hi) < 1e-6)
+                if not np.any(edge):
+                    break
+                centre = sol.x
+        r = residual(lm, xs, train, peaks=False)
         cand = (float(r @ r), xs)
         if best is None or cand[0] < best[0]:
             best = cand
+    # a fit that ends worse than where it started (the peaks phase can lead astray) keeps the start
+    r = residual(lm, x0, train, peaks=False)
+    if float(r @ r) < best[0]:
+        best = (float(r @ r), x0)
     return best[1], best[0]
