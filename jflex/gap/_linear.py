@@ -456,17 +456,19 @@ def fit_linear(lm: LinearModel, x0, train, free=None, starts=(), peaks_first: bo
             centre = u0
             for _ in range(1 + (0 if peaks_only else RECENTRE)):
                 lo, hi = centre - width, centre + width
-                sol = so.least_squares(fun, np.clip(xs[free], lo, hi), method="trf", bounds=(lo, hi), tr_solver="lsmr",
-                                       max_nfev=15 * (1 + free.sum()))
+                # (lsmr's 2-D subspace step fails on a single free parameter: exact there)
+                sol = so.least_squares(fun, np.clip(xs[free], lo, hi), method="trf", bounds=(lo, hi),
+                                       tr_solver="lsmr" if free.sum() > 1 else "exact", max_nfev=15 * (1 + free.sum()))
                 xs = xs.copy()
                 xs[free] = sol.x
-                # a parameter that stops on the box's edge (a new compliance the nominal springs had
-                # absorbed: they stiffen as it softens; a lightly damped new mode) moves the box
-                # there, a bounded number of times (spurious minima at vanishing or huge damping)
+                # a stiffness that stops on the box's edge (a new compliance the nominal springs had
+                # absorbed: they stiffen as it softens) moves the box there, a bounded number of
+                # times; damping keeps its box (moved, it ran to the spurious minimum at vanishing
+                # damping: a sharp peak between the fitted frequencies)
                 edge = (np.abs(sol.x - lo) < 1e-6) | (np.abs(sol.x - hi) < 1e-6)
-                if not np.any(edge):
+                if not np.any(edge & (width == 3.0)):
                     break
-                centre = sol.x
+                centre = np.where(width == 3.0, sol.x, centre)
         r = residual(lm, xs, train, peaks=False)
         cand = (float(r @ r), xs)
         if best is None or cand[0] < best[0]:
