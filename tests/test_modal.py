@@ -229,3 +229,14 @@ def test_newton_solver_refuses_overdamped_modes():
     assert np.isfinite(np.asarray(md.frequency)).all()
     with pytest.raises(jflex.JFlexError, match="solver"):
         modes(M, C, K, solver="qr")
+
+
+@pytest.mark.parametrize("split", [0.0, 1e-6, 1e-3, 0.05])
+def test_newton_solver_at_a_mode_crossing(split):
+    """Two modes at (nearly) the same undamped frequency, mixed by non-proportional damping."""
+    M = np.eye(3)
+    K = np.diag([400.0, 400.0 * (1 + split), 2500.0])
+    C = np.array([[0.8, 0.5, 0.1], [0.5, 0.2, 0.0], [0.1, 0.0, 1.0]])
+    ref = modes(M, C, K)
+    md = modes(M, C, K, solver="newton")
+    assert np.allclose(md.eigenvalue, ref.eigenvalue, rtol=1e-10)

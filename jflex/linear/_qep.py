@@ -23,7 +23,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-_ITERS = 10
+_ITERS = 5
 _TOL = 1e-8
 
 
@@ -68,6 +68,46 @@ def _newton_step(Kt, Ct, lam, y, r):
     return lam + d[r], [y[k] + d[k] if k != r else y[k] for k in range(n)]
 
 
+def _start(Ct, w2):
+    """Starting eigenpairs in modal coordinates: each undamped mode with its own damping, coupled
+    by damping to its nearest neighbour in frequency through the first-order (lambda ~ i w) 2x2
+    problem ``lambda y = [[a, b], [c, d]] y``. Near a crossing of two modes, damping mixes them
+    strongly and the uncoupled start would cost Newton many more steps."""
+    n = w2.shape[0]
+    cd = jnp.diagonal(Ct)
+    lam0 = -0.5 * cd + 1j * jnp.sqrt(jnp.maximum(w2 - 0.25 * cd**2, 0.0))
+    if n == 1:
+        return lam0, jnp.eye(1, dtype=complex)
+    w = jnp.sqrt(jnp.maximum(w2, 0.0))
+    lams, cols = [], []
+    for r in range(n):
+        cands = [k for k in (r - 1, r + 1) if 0 <= k < n]
+
+        def pair(k):
+            a, d = lam0[r], lam0[k]
+            b, c = -0.5 * Ct[r, k], -0.5 * Ct[k, r]
+            half = 0.5 * (a - d)
+            disc = jnp.sqrt(half * half + b * c)
+            disc = jnp.where(jnp.real(jnp.conj(half) * disc) >= 0, disc, -disc)  # the branch that tends to a
+            mu = 0.5 * (a + d) + disc
+            den = mu - d
+            yk = jnp.where(jnp.abs(den) > 0, c / jnp.where(jnp.abs(den) > 0, den, 1.0), 0.0)
+            return mu, yk
+
+        (mu, yk), k = pair(cands[0]), cands[0]
+        y = jnp.zeros(n, complex).at[r].set(1.0)
+        if len(cands) == 2:
+            mu2, yk2 = pair(cands[1])
+            use2 = jnp.abs(w[cands[1]] - w[r]) < jnp.abs(w[cands[0]] - w[r])
+            mu = jnp.where(use2, mu2, mu)
+            y = y.at[cands[0]].set(jnp.where(use2, 0.0, yk)).at[cands[1]].set(jnp.where(use2, yk2, 0.0))
+        else:
+            y = y.at[k].set(yk)
+        lams.append(mu)
+        cols.append(y)
+    return jnp.stack(lams), jnp.stack(cols, axis=1)
+
+
 def qep_newton(M, C, K, iters: int = _ITERS):
     """The n eigenpairs with Im lambda > 0 of ``(lambda^2 M + lambda C + K) psi = 0`` (underdamped).
 
@@ -86,9 +126,7 @@ def qep_newton(M, C, K, iters: int = _ITERS):
     def solve(Kt, Ct, w2, lam=None, Y=None, iters=iters):
         K_, C_ = [[Kt[i, j] for j in range(n)] for i in range(n)], [[Ct[i, j] for j in range(n)] for i in range(n)]
         if lam is None:
-            c = jnp.diagonal(Ct)
-            lam = -0.5 * c + 1j * jnp.sqrt(jnp.maximum(w2 - 0.25 * c**2, 0.0))
-            Y = jnp.eye(n, dtype=complex)
+            lam, Y = _start(Ct, w2)
         lams, ys = [], []
         for r in range(n):  # static: each mode has its own elimination order
             lr, y = lam[r], [Y[k, r] for k in range(n)]
