@@ -39,8 +39,8 @@ equal within 1e-9 m), and the stiff Kvaerno5 takes as many (11.0k) at 5x the wal
 solve with the Jacobian of the autodiff Lagrangian per step): the steps are set by accuracy, not
 stability, so a stiff solver does not pay. So the
 experiment keeps Tsit5; the full config keeps the paper's two hub modes (about 4 min per
-flexible-hub variant on 2 cores), the quick one uses one hub mode (~1 min), which changes the
-Table 5 statistics by the amounts given in docs/seed001.md.
+flexible-hub variant on 2 cores, 43k steps), the quick one uses one hub mode (~40 s, 14k steps),
+which changes the Table 5 statistics by less than 0.02% and the peak hub coordinate by 1.5%.
 
 **Filled-in values** (the paper gives the loading only as figures 6-7 and does not state the
 simulated time span): see configs/seed001_rp_arm.yaml and results.json["filled_values"]; each
