@@ -18,7 +18,6 @@ tables) so that ``jflex diagnose configs/cases/kr90_config1`` works on its own.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import pathlib
 
 import numpy as np
@@ -32,12 +31,9 @@ CASES = ROOT / "configs" / "cases"
 
 
 def _seed_robot(cfg_name):
-    spec = importlib.util.spec_from_file_location("posture_modal", ROOT / "experiments" / "posture_modal.py")
-    pm = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(pm)
     path = ROOT / "configs" / "seed003" / cfg_name
-    rob = pm.Seed003Robot(jflex.load_yaml(path), path.parent)
-    r, _ = pm.fit_common_ratio(rob, 0, rob.cfg["gear_ratios"].get("bounds", [20, 600]), "actuated")
+    rob = jflex.Seed003Robot.from_config(path)
+    r, _ = rob.fit_common_ratio(0, rob.cfg["gear_ratios"].get("bounds", [20, 600]), "actuated")
     model = rob.model(np.full(3, r))
     return rob, model.robot, r
 
@@ -51,7 +47,7 @@ def _robot_yaml(folder, rob, robot, r):
     # tilts joint 1, as orthogonal_compliance does: an assumption, stated in the notes)
     P[0, 4] = P[0, 6] = 0.5 * P[0, 9]
     np.savez(folder / "inertia.npz", inertia=P)  # a base-parameter realisation: not physical per link
-    base["notes"] = (f"link parameters realised from seed 003 base parameters (experiments/posture_modal.py), "
+    base["notes"] = (f"link parameters realised from seed 003 base parameters (jflex.Seed003Robot), "
                      f"common gear ratio {r:.1f} (rotor share on the held motors); link1 Ixx = Iyy = Izz/2 assumed")
     (folder / "robot.yaml").write_text(yaml.safe_dump(base, sort_keys=False))
 

@@ -27,50 +27,15 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "identify_seed003.yaml"
 
 
-# --- the seed-003 model (the construction of experiments/posture_modal.py) ----------------------
-class Seed003:
+# --- the seed-003 model: jflex.Seed003Robot (shared with posture_modal and gap_seed003) ---------
+class Seed003(jflex.Seed003Robot):
     def __init__(self, path: pathlib.Path):
         cfg = jflex.load_yaml(path)
-        self.cfg, self.name = cfg, cfg["name"]
-        self.robot0 = jflex.load_robot(str((path.parent / cfg["robot"]).resolve()))
-        a1, a2 = float(self.robot0.placement_p[1, 0]), float(self.robot0.placement_p[2, 0])
-        self.psi = np.asarray(cfg["base_parameters"], dtype=float)
-        if self.psi.shape != (27,):
-            raise jflex.ConfigError(f"{path}: base_parameters: expected 27 numbers (Table 3.3/3.6), got {self.psi.shape}")
-        # Link parameters realising each base parameter (only their base combinations matter).
-        self.R, _ = jflex.seed003_realisation_matrix(self.robot0, a1, a2)
-        self.K = np.asarray(cfg["stiffness"], float)
-        self.C = np.asarray(cfg["damping"], float)
-        self.postures = np.radians(np.asarray(cfg["postures_deg"], float))
-        self.thesis = {k: np.asarray(v, float) if isinstance(v, list) else v for k, v in cfg["thesis"].items()}
-
-    def model(self, r, K=None, C=None):
-        Im3 = self.psi[15]
-        Im = [r[0] / r[2] * Im3, r[1] / r[2] * Im3, Im3]  # thesis: I_m,i = (r_i / r_3) I_m,3
-        e = np.eye(15)
-        p_link = self.psi[:15] - r[0] ** 2 * Im[0] * e[0] - r[1] ** 2 * Im[1] * e[1]
-        robot = self.robot0.replace(inertia=(self.R @ p_link).reshape(3, 10))
-        K = self.K if K is None else K
-        C = self.C if C is None else C
-        effects = [jflex.effects.FlexibleJoints(K, C, rotor_inertia=Im, gear_ratio=list(r), coupling=True)]
-        if self.cfg.get("gravity_compensator", True):
-            effects.append(jflex.effects.FourierGravityCompensator(self.psi[18:21], joint=1))
-        return jflex.Model(robot, effects)
+        super().__init__(cfg, path.parent)
 
     def gear_ratio(self, hold):
         """One common ratio reproducing the thesis' Model frequencies at configuration 1."""
-        target = np.sort(self.thesis["frequency_model_Hz"][0])
-        lo, hi = np.log(20.0), np.log(600.0)
-        for _ in range(3):
-            grid = np.exp(np.linspace(lo, hi, 41))
-            err = []
-            for r in grid:
-                f = np.sort(np.asarray(jflex.modal_analysis(self.model(np.full(3, r)), self.postures[0], hold=hold).frequency))
-                err.append(np.sqrt(np.mean(((f - target) / target) ** 2)))
-            k = int(np.nanargmin(err))
-            step = (hi - lo) / 40
-            lo, hi = np.log(grid[k]) - 2 * step, np.log(grid[k]) + 2 * step
-        return float(grid[k]), float(err[k])
+        return self.fit_common_ratio(0, (20.0, 600.0), hold)
 
 
 def tracked_order(model, postures, hold, steps):

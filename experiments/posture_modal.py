@@ -27,60 +27,12 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "posture_modal.yaml"
 
 
-appendix_b_columns = jflex.seed003_appendix_b_columns
-realisation_matrix = jflex.seed003_realisation_matrix
-
-
-class Seed003Robot:
-    """Everything needed to build the flexible-joint model of one seed-003 robot."""
-
-    def __init__(self, cfg: dict, cfg_dir: pathlib.Path):
-        self.cfg = cfg
-        self.name = cfg["name"]
-        self.robot0 = jflex.load_robot(str((cfg_dir / cfg["robot"]).resolve()))
-        dh = np.asarray(self.robot0.placement_p)
-        self.a1, self.a2 = float(dh[1, 0]), float(dh[2, 0])
-        psi = np.asarray(cfg["base_parameters"], dtype=float)
-        if psi.shape != (27,):
-            raise jflex.ConfigError(f"{self.name}.base_parameters: expected 27 numbers (Table 3.3/3.6), got {psi.shape}")
-        self.psi = psi
-        self.K = np.asarray(cfg["stiffness"], dtype=float)
-        self.C = np.asarray(cfg["damping"], dtype=float)
-        self.R, self.realisation_error = realisation_matrix(self.robot0, self.a1, self.a2)
-        self.postures = np.radians(np.asarray(cfg["postures_deg"], dtype=float))
-        self.thesis = {k: np.asarray(v, dtype=float) if isinstance(v, list) else v for k, v in cfg["thesis"].items()}
-
-    def model(self, r):
-        """The flexible-joint model for gear ratios ``r`` (3,) (arrays may be traced)."""
-        Im3 = self.psi[15]
-        r1, r2, r3 = r[0], r[1], r[2]
-        Im = [r1 / r3 * Im3, r2 / r3 * Im3, Im3 + 0.0 * r3]  # thesis: I_m,i = (r_i / r_3) I_m,3
-        # psi_1 and psi_2 hold the reflected rotor inertias r_i^2 I_m,i, which the rotors of the
-        # flexible-joint effect carry themselves: remove them from the links' share.
-        e0, e1 = np.eye(15)[0], np.eye(15)[1]
-        p_link = self.psi[:15] - r1**2 * Im[0] * e0 - r2**2 * Im[1] * e1
-        inertia = (self.R @ p_link).reshape(3, 10)
-        robot = self.robot0.replace(inertia=inertia)
-        effects = [
-            jflex.effects.FlexibleJoints(self.K, self.C, rotor_inertia=Im, gear_ratio=[r1, r2, r3], coupling=True)
-        ]
-        if self.cfg.get("gravity_compensator", True):
-            effects.append(jflex.effects.FourierGravityCompensator(self.psi[18:21], joint=1))
-        return jflex.Model(robot, effects)
+# the seed-003 robots (DH, base parameters, flexible joints, EMA postures) live in the library
+Seed003Robot = jflex.Seed003Robot
 
 
 def fit_common_ratio(rob: Seed003Robot, posture: int, bounds, hold, n_grid: int = 601) -> tuple[float, float]:
-    """One gear ratio for all joints reproducing the thesis' Model frequencies at ``posture``:
-    the best of a log-spaced grid (one compiled sweep); returns (r, rms relative error)."""
-    target = np.sort(rob.thesis["frequency_model_Hz"][posture])
-    q = rob.postures[posture]
-    grid = np.exp(np.linspace(np.log(bounds[0]), np.log(bounds[1]), n_grid))
-    f = jflex.sweep(lambda r: jflex.modal_analysis(rob.model(r * np.ones(3)), q, hold=hold).frequency,
-                    grid, chunk_size=n_grid, progress=False)
-    err = np.sqrt(np.mean(((np.sort(f, axis=1) - target) / target) ** 2, axis=1))
-    err[~np.isfinite(err)] = np.inf
-    k = int(np.argmin(err))
-    return float(grid[k]), float(err[k])
+    return rob.fit_common_ratio(posture, bounds, hold, n_grid)
 
 
 def modal_table(rob: Seed003Robot, model, hold, frame, steps):

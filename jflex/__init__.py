@@ -121,4 +121,5 @@ from . import gap as gap  # sim-to-real gap diagnosis (issue 6)
 from ._seed003 import (
     appendix_b_columns as seed003_appendix_b_columns,
     realisation_matrix as seed003_realisation_matrix,
+    Seed003Robot as Seed003Robot,
 )
