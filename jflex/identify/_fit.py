@@ -228,6 +228,11 @@ class AbstractData(eqx.Module):
     def nrmse(self, model) -> dict:
         raise NotImplementedError
 
+    def nrmse_from_residuals(self, residuals: dict) -> dict | None:
+        """NRMSE per channel from this object's ``residuals`` dict when it follows from them
+        (saves :func:`fit` a separate compile of the model prediction); ``None`` otherwise."""
+        return None
+
 
 # --- the fit ------------------------------------------------------------------------------------
 @dataclasses.dataclass
@@ -244,7 +249,9 @@ class FitResult:
       :class:`Identity`), largest first; ``weak_directions``: for singular values below
       ``1e-6`` of the largest (not identifiable from this data), the parameter combinations.
     - ``nrmse``: dict channel -> NRMSE; ``cost`` ``0.5 |r|^2``; ``history`` of costs;
-      ``steps``; ``result``: solver message; ``interrupted``; ``seconds``.
+      ``steps``; ``result``: solver message; ``interrupted``; ``seconds``; ``timing``: dict with
+      ``compile_s`` (first residual-and-Jacobian evaluation, mostly compilation), ``jacobian_evals``
+      and ``jacobian_run_s`` (their total run time after the first).
     """
 
     model: Any
@@ -263,6 +270,7 @@ class FitResult:
     weak_directions: list
     result: str
     interrupted: bool
+    timing: dict = dataclasses.field(default_factory=dict)
 
     def summary(self) -> str:
         lines = [f"fit: {self.steps} steps, cost {self.cost:.6g}, {self.result}" + (" (interrupted)" if self.interrupted else "")]
@@ -288,6 +296,7 @@ class FitResult:
             "seconds": self.seconds,
             "result": self.result,
             "interrupted": self.interrupted,
+            "timing": dict(self.timing),
         }
 
 
@@ -303,6 +312,30 @@ def residual_vector(model, data) -> jnp.ndarray:
     for d in _as_list(data):
         parts += [jnp.ravel(v) for v in d.residuals(model).values()]
     return jnp.concatenate(parts)
+
+
+def _linear_model(u, args):
+    """The residual's first-order model about the evaluation point: ``r0 + J (u - u0)``.
+
+    Gauss-Newton-type optimistix solvers evaluate ``fn`` only at ``state.y_eval`` and use its
+    Jacobian there; handing them this linear model with ``(r0, J, u0)`` computed outside their
+    ``step`` keeps the expensive model solve out of the step's program (see :func:`fit`)."""
+    r0, J, u0 = args
+    return r0 + J @ (u - u0), None
+
+
+@eqx.filter_jit
+def _gn_init(solver, u, r0, tags):
+    f_struct = jax.ShapeDtypeStruct(r0.shape, r0.dtype)
+    return solver.init(_linear_model, u, (r0, jnp.zeros((r0.shape[0], u.shape[0])), u), {}, f_struct, None, tags)
+
+
+@eqx.filter_jit
+def _gn_step(solver, u, state, args, tags):
+    u2, state2, _ = solver.step(_linear_model, u, args, {}, state, tags)
+    done, res = solver.terminate(_linear_model, u2, args, {}, state2, tags)
+    # the residual at the accepted point u2 is the one the solver keeps (no new evaluation)
+    return u2, state2, done, res, 0.5 * jnp.sum(state2.f_info.residual**2), state2.y_eval
 
 
 def fit(
@@ -329,6 +362,14 @@ def fit(
     - ``max_steps``; ``progress``: print every step (or every ``progress`` steps) to stderr;
       ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
 
+    Gauss-Newton-type solvers (Levenberg-Marquardt, Gauss-Newton, Dogleg) get the residual and
+    its Jacobian from ONE compiled function of the parameters (``jax.jacfwd``: the p tangents
+    ride along the primal in one batched solve, the parameters are traced arguments, so no
+    recompilation across steps) that is evaluated outside the solver's step; the same values
+    serve the start check, every step and the final report. (Letting the solver ``jax.linearize``
+    a time simulation instead re-runs the whole ODE loop for every Jacobian column batch and
+    compiles the solve three times into each step.)
+
     Ctrl-C stops the loop: the best parameters seen are kept and ``interrupted`` is set.
 
     **Returns:** :class:`FitResult`.
@@ -339,11 +380,112 @@ def fit(
     solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
     u0 = spec.pack(pair)
 
-    def resid(u, args):
+    def resid_parts(u):
         m, d = spec.apply(pair, u)
-        return jnp.concatenate([residual_vector(m, d), spec.prior_residuals(u)])
+        parts = [dict(di.residuals(m)) for di in d]
+        r = jnp.concatenate([jnp.ravel(v) for p in parts for v in p.values()] + [spec.prior_residuals(u)])
+        return r, parts
+
+    def resid(u, args):
+        return resid_parts(u)[0]
 
     is_min = isinstance(solver, optx.AbstractMinimiser)
+    every = int(progress) if progress and not isinstance(progress, bool) else (1 if progress else 0)
+    timing = {}
+    if is_min or not isinstance(solver, optx.AbstractGaussNewton):
+        return _fit_generic(pair, spec, solver, resid, u0, is_min, max_steps, every, callback, weak_tol)
+
+    @eqx.filter_jit
+    def r_and_jac(u):
+        def g(v):
+            r, parts = resid_parts(v)
+            return r, (r, parts)
+
+        J, (r, parts) = jax.jacfwd(g, has_aux=True)(u)
+        return r, J, parts
+
+    cache = {}
+
+    def evaluate(u):
+        key = np.asarray(u).tobytes()
+        if key not in cache:
+            t0 = time.perf_counter()
+            out = jax.block_until_ready(r_and_jac(u))
+            dt = time.perf_counter() - t0
+            if "compile_s" not in timing:
+                timing.update(compile_s=dt, jacobian_evals=1, jacobian_run_s=0.0)
+            else:
+                timing["jacobian_evals"] += 1
+                timing["jacobian_run_s"] += dt
+            cache.clear()  # the solver needs the latest; the best one is kept apart
+            cache[key] = out
+        return cache[key]
+
+    t_start = time.perf_counter()
+    r0, J0, parts0 = evaluate(u0)
+    cost0 = float(0.5 * jnp.sum(r0**2))
+    if not np.isfinite(cost0):
+        raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
+    tags = frozenset()
+    state = _gn_init(solver, u0, r0, tags)
+    best_u, best_cost, history = u0, cost0, [cost0]
+    best_eval = (r0, J0, parts0)
+    u, k, interrupted, message = u0, 0, False, "max_steps reached"
+    y_eval = u0
+    try:
+        for k in range(1, max_steps + 1):
+            ev, y_ev = evaluate(y_eval), y_eval
+            u, state, done, res, cost, y_eval = _gn_step(solver, u, state, (ev[0], ev[1], y_ev), tags)
+            cost = float(cost)
+            history.append(cost)
+            if np.isfinite(cost) and cost < best_cost:
+                # an accepted step moves to the point just evaluated
+                best_u, best_cost = u, cost
+                best_eval = ev if np.array_equal(np.asarray(u), np.asarray(y_ev)) else None
+            if every and (k % every == 0 or bool(done)):
+                print(f"  fit step {k:4d}  cost {cost:.6e}  best {best_cost:.6e}  {time.perf_counter() - t_start:.1f} s", file=sys.stderr)
+            if callback is not None:
+                callback(k, best_cost, spec.values(best_u))
+            if bool(done):
+                message = "converged" if res == optx.RESULTS.successful else str(res)
+                break
+    except KeyboardInterrupt:
+        interrupted, message = True, "interrupted"
+    seconds = time.perf_counter() - t_start
+    if best_eval is None:
+        best_eval = evaluate(best_u)
+    timing["total_s"] = time.perf_counter() - t_start
+    r, J_u, parts = best_eval
+    nrmse = _nrmse_of(pair, spec, best_u, parts)
+    n_data = r.shape[0] - spec.prior_residuals(best_u).shape[0]  # the prior rows are folded in by _report
+    return _report(pair, spec, best_u, best_cost, history, k, seconds, message, interrupted, weak_tol,
+                   pre=(np.asarray(J_u)[:n_data], np.asarray(r)[:n_data], nrmse), timing=timing)
+
+
+def _nrmse_of(pair, spec, u, parts):
+    """NRMSE per channel from the residuals where the data objects allow it, else predicted."""
+    out, missing = {}, []
+    for i, (d, p) in enumerate(zip(pair[1], parts)):
+        v = d.nrmse_from_residuals(p)
+        if v is None:
+            missing.append(i)
+        else:
+            out.update({k: float(x) for k, x in v.items()})
+    if missing:
+        @eqx.filter_jit
+        def f(uu):
+            m, dd = spec.apply(pair, uu)
+            o = {}
+            for i in missing:
+                o.update(dd[i].nrmse(m))
+            return o
+
+        out.update({k: float(v) for k, v in f(u).items()})
+    return out
+
+
+def _fit_generic(pair, spec, solver, resid, u0, is_min, max_steps, every, callback, weak_tol):
+    """Any other optimistix solver (minimisers): the solver evaluates the residual itself."""
     fn = (lambda u, a: (0.5 * jnp.sum(resid(u, a) ** 2), None)) if is_min else (lambda u, a: (resid(u, a), None))
     tags = frozenset()
     f_struct, aux_struct = jax.eval_shape(lambda: fn(u0, None))
@@ -361,7 +503,6 @@ def fit(
         raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
     best_u, best_cost, history = u0, cost0, [cost0]
     u, k, interrupted, message = u0, 0, False, "max_steps reached"
-    every = int(progress) if progress and not isinstance(progress, bool) else (1 if progress else 0)
     t_start = time.perf_counter()
     try:
         for k in range(1, max_steps + 1):
@@ -383,7 +524,9 @@ def fit(
     return _report(pair, spec, best_u, best_cost, history, k, seconds, message, interrupted, weak_tol)
 
 
-def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, weak_tol):
+def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, weak_tol, pre=None, timing=None):
+    """``pre``: ``(J_u, r, nrmse)`` already known at ``u`` (Jacobian w.r.t. the optimisation
+    variables u, data residuals without the prior rows); otherwise computed here."""
     p = spec.physical(u)
     fitted, fitted_data = spec.apply(pair, u)
 
@@ -399,9 +542,14 @@ def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, 
             out.update(d.nrmse(m))
         return jax.jacfwd(r_of_p)(pp), r_of_p(pp), out
 
-    J, r, nrmse = jac_and_nrmse(p)
-    J, r = np.asarray(J), np.asarray(r)
-    nrmse = {k: float(v) for k, v in nrmse.items()}
+    dpdu = np.asarray(jax.jacfwd(spec.physical)(u)).diagonal()  # the transforms act elementwise
+    if pre is None:
+        J, r, nrmse = jac_and_nrmse(p)
+        J, r = np.asarray(J), np.asarray(r)
+        nrmse = {k: float(v) for k, v in nrmse.items()}
+    else:
+        J_u, r, nrmse = pre
+        J = np.asarray(J_u) / dpdu[None, :]
     m_, n_ = J.shape
     # With no more residuals than parameters the noise level cannot be estimated from the fit.
     s2 = float(r @ r) / (m_ - n_) if m_ > n_ else float("nan")
@@ -416,7 +564,7 @@ def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, 
     std_flat = np.sqrt(np.clip(np.diag(cov), 0, None))
     # Columns scaled by dp/du: the sensitivities to the optimisation variables, which are relative
     # for Log, bounded-relative for Bounded and in units of the start magnitude for Identity.
-    scale = np.abs(np.asarray(jax.jacfwd(spec.physical)(u)).diagonal())
+    scale = np.abs(dpdu)
     Js = J * scale
     _, sv, Vt = np.linalg.svd(Js, full_matrices=False)
     labels = spec.labels()
@@ -433,5 +581,5 @@ def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, 
     return FitResult(
         model=fitted, data=fitted_data, u=u, values=spec.values(u), std=std, covariance=cov, singular_values=sv, nrmse=nrmse,
         cost=float(cost), history=history, steps=int(steps), seconds=float(seconds), labels=labels,
-        weak_directions=weak, result=message, interrupted=interrupted,
+        weak_directions=weak, result=message, interrupted=interrupted, timing=dict(timing or {}),
     )
