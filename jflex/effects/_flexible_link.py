@@ -32,7 +32,28 @@ deflection (a simplification).
 Damping: ``air`` [kg/(s m)] is a distributed viscous force on the deflection rate;
 ``damping`` / ``hub_damping`` a damping law (Kelvin-Voigt, fractional, hysteretic) on the modal
 coordinates with the beam's stiffness; a hysteretic law acts on the tip deflection.
-Foreshortening (the quadratic axial shortening, geometric stiffening) is not modelled.
+
+**Foreshortening (``foreshortening=True``, default off).** A beam that bends without
+stretching (inextensible neutral axis) draws its points towards the clamp: the point at arc
+length ``s`` from the clamp moves axially by
+
+    u(s) = -1/2 int_0^s w'(r)^2 dr = -1/(2 l) eta^T S(s / l) eta,
+    S_ij(xi) = int_0^xi phi_i'(t) phi_j'(t) dt,
+
+with ``phi'`` the derivative in the unit-length variable and ``l`` the current free length (so
+a sliding link's time-varying length enters too), ``u`` evaluated by the beam's Gauss rule
+mapped onto ``[0, xi]`` for every station. The point positions of the kinetic energy and of the
+gravity potential carry ``u``, so the axial load of the rigid motion stiffens the bending by
+itself: centrifugal stiffening of a spinning beam (for this in-plane bending, Southwell's
+``omega^2 = omega_0^2 + (K_1 - 1) Omega^2``, ``K_1 = 1.193`` for the first mode), gravity
+stiffening of a hanging beam and softening of a standing one, with the matching Coriolis and
+axial-inertia couplings. It applies to a flexible hub as well (its tip, the link's clamp,
+moves in by ``u_h(L_h)``). The strain energy stays the linear bending energy: the model is
+consistent to second order in the deflection (axial strain, higher-order shortening and the
+nonlinear curvature are neglected), which is what small-vibration frequencies and moderate
+deflections (``|w'| << 1``) need. Without the option a point keeps its axial position ``s``:
+the rotating beam then has only the in-plane softening, ``omega^2 = omega_0^2 - Omega^2``,
+acceptable only while ``Omega^2`` (or ``g / l``) is small against ``omega_0^2``.
 """
 
 from __future__ import annotations
@@ -58,7 +79,8 @@ class FlexibleLink(AbstractEffect):
     ``name`` output/coordinate prefix; ``sliding_joint`` prismatic joint whose coordinate extends
     the free length; ``hub`` optional flexible hub :class:`jflex.Beam`; ``air`` [kg/(s m)];
     ``damping``, ``hub_damping`` damping laws; ``thickness`` [m] (for strain outputs);
-    ``include_rigid`` (static).
+    ``include_rigid`` (static); ``foreshortening`` (static) adds the quadratic axial shortening
+    of the bent beam to the point positions (geometric stiffening, see the module docstring).
     """
 
     beam: Beam
@@ -74,10 +96,11 @@ class FlexibleLink(AbstractEffect):
     bend: int = eqx.field(static=True)
     sliding_joint: str | None = eqx.field(static=True)
     include_rigid: bool = eqx.field(static=True)
+    foreshortening: bool = eqx.field(static=True)
 
     def __init__(self, body, beam: Beam, *, root=(0.0, 0.0, 0.0), axis: int = 0, bend: int = 1, name: str = "beam",
                  sliding_joint=None, hub: Beam | None = None, air=0.0, damping=None, hub_damping=None,
-                 thickness=0.0, include_rigid: bool = True):
+                 thickness=0.0, include_rigid: bool = True, foreshortening: bool = False):
         if axis == bend or axis not in (0, 1, 2) or bend not in (0, 1, 2):
             raise ParameterError(f"FlexibleLink '{name}': axis and bend must be different body-axis indices 0-2, got {axis}, {bend}")
         root = np.asarray(root, dtype=float)
@@ -92,6 +115,7 @@ class FlexibleLink(AbstractEffect):
         self.body, self.beam, self.root, self.axis, self.bend, self.name = body, beam, jnp.asarray(root), axis, bend, name
         self.sliding_joint, self.hub, self.air, self.damping = sliding_joint, hub, jnp.asarray(float(air)), damping
         self.hub_damping, self.thickness, self.include_rigid = hub_damping, jnp.asarray(float(thickness)), include_rigid
+        self.foreshortening = bool(foreshortening)
 
     # ---- bookkeeping -------------------------------------------------------------------
     @property
@@ -157,6 +181,17 @@ class FlexibleLink(AbstractEffect):
         return e[self.axis], e[self.bend], jnp.cross(e[self.axis], e[self.bend])
 
     # ---- geometry ------------------------------------------------------------------------
+    def _shortening(self, beam: Beam, xi, eta, l):
+        """Axial displacement ``u = -1/(2 l) int_0^xi (phi'(t) . eta)^2 dt`` [m] (shape of ``xi``)
+        of the stations ``xi`` of a beam of current length ``l``; 0 without foreshortening.
+        Gauss rule of the beam mapped onto each ``[0, xi]``."""
+        xi = jnp.asarray(xi)
+        if not self.foreshortening:
+            return jnp.zeros(xi.shape)
+        xq, wq = beam.quadrature()
+        d1 = beam.shapes(xi[..., None] * jnp.asarray(xq))[1]  # (..., nq, m)
+        return -0.5 / l * xi * ((d1 @ eta) ** 2 @ jnp.asarray(wq))
+
     def _clamp(self, slots, x):
         """Clamp point (3,) and rotation psi of the link beam in body axes."""
         ea, eb, _ = self._units()
@@ -165,7 +200,8 @@ class FlexibleLink(AbstractEffect):
         eh, _ = self._coords(slots, x)
         p, d1, _ = self.hub.shapes(1.0)
         Lh = self.hub.length
-        return self.root + Lh * ea + (p @ eh) * eb, (d1 @ eh) / Lh
+        uh = self._shortening(self.hub, 1.0, eh, Lh)
+        return self.root + (Lh + uh) * ea + (p @ eh) * eb, (d1 @ eh) / Lh
 
     def _link_point(self, robot, slots, x, a):
         """Body-frame positions (..., 3) and cross-section rotations (...) of the link points at
@@ -176,16 +212,19 @@ class FlexibleLink(AbstractEffect):
         s = l - a
         p, d1, _ = self.beam.shapes(s / l)
         w, slope = p @ eta, (d1 @ eta) / l
+        sa = s + self._shortening(self.beam, s / l, eta, l)  # axial position along the clamp axis
         c, psi = self._clamp(slots, x)
         cs, sn = jnp.cos(psi), jnp.sin(psi)
-        r = c + (s * cs - w * sn)[..., None] * ea + (s * sn + w * cs)[..., None] * eb
+        r = c + (sa * cs - w * sn)[..., None] * ea + (sa * sn + w * cs)[..., None] * eb
         return r, psi + slope
 
     def _hub_point(self, slots, x, s):
         ea, eb, _ = self._units()
         eh, _ = self._coords(slots, x)
-        p, d1, _ = self.hub.shapes(s / self.hub.length)
-        return self.root + s[..., None] * ea + (p @ eh)[..., None] * eb, (d1 @ eh) / self.hub.length
+        Lh = self.hub.length
+        p, d1, _ = self.hub.shapes(s / Lh)
+        sa = s + self._shortening(self.hub, s / Lh, eh, Lh)
+        return self.root + sa[..., None] * ea + (p @ eh)[..., None] * eb, (d1 @ eh) / Lh
 
     def _to_world(self, robot, ls, r):
         b, k = self._body(robot)
