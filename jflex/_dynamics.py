@@ -153,8 +153,9 @@ def _inertia_to_parent(robot, c, i, qi, ls, I):
     DH joint, most URDF joints) the joint rotation is applied first, in closed form, and the
     constant placement after it, where trace-time folding makes it nearly free."""
     ax = c.axis[i]
-    if robot.joint_types[i] != PRISMATIC and ax.x == 0.0 and ax.y == 0.0 and ax.z in (1.0, -1.0):
-        cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if ax.z == 1.0 else -jnp.sin(qi))
+    # the test is on trace-time floats: a traced axis (gradients in the robot) takes the general path
+    if robot.joint_types[i] != PRISMATIC and s._is(ax.x, 0.0) and s._is(ax.y, 0.0) and (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
+        cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi))
         return I.rotated_z(cs, sn).to_parent(c.Rpl[i], c.ppl[i])
     return I.to_parent(ls.R[i], ls.p[i])
 
