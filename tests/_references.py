@@ -78,3 +78,20 @@ def dh_chain(table, q, types, convention):
             T = T @ _rz(th) @ _tr(0, dd) @ _tr(a, 0) @ _rx(alpha)
         frames.append(T.copy())
     return frames
+
+
+def fe_beam_matrices(L, m, EI, ne=60):
+    """Independent beam reference: stiffness and mass matrices of a uniform Euler-Bernoulli beam
+    from ``ne`` Hermite cubic elements, dofs (w, w') per node from the root; nothing clamped."""
+    h = L / ne
+    ke = EI / h**3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                               [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
+    me = m * h / 420 * np.array([[156, 22 * h, 54, -13 * h], [22 * h, 4 * h * h, 13 * h, -3 * h * h],
+                                 [54, 13 * h, 156, -22 * h], [-13 * h, -3 * h * h, -22 * h, 4 * h * h]])
+    n = 2 * (ne + 1)
+    K, M = np.zeros((n, n)), np.zeros((n, n))
+    for e in range(ne):
+        i = slice(2 * e, 2 * e + 4)
+        K[i, i] += ke
+        M[i, i] += me
+    return K, M

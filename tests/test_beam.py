@@ -5,23 +5,14 @@ import pytest
 import scipy.linalg as sl
 
 import jflex
+from _references import fe_beam_matrices
 
 REL = 1e-3  # the issue's 0.1 %
 
 
 def _fe_frequencies(L, m, EI, Mt=0.0, Jt=0.0, ne=60, k=4):
     """Independent reference: Hermite cubic finite elements of a clamped beam with a tip body."""
-    h = L / ne
-    ke = EI / h**3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
-                               [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
-    me = m * h / 420 * np.array([[156, 22 * h, 54, -13 * h], [22 * h, 4 * h * h, 13 * h, -3 * h * h],
-                                 [54, 13 * h, 156, -22 * h], [-13 * h, -3 * h * h, -22 * h, 4 * h * h]])
-    n = 2 * (ne + 1)
-    K, M = np.zeros((n, n)), np.zeros((n, n))
-    for e in range(ne):
-        i = slice(2 * e, 2 * e + 4)
-        K[i, i] += ke
-        M[i, i] += me
+    K, M = fe_beam_matrices(L, m, EI, ne)
     M[-2, -2] += Mt
     M[-1, -1] += Jt
     w2 = sl.eigh(K[2:, 2:], M[2:, 2:], eigvals_only=True)[:k]

@@ -15,6 +15,7 @@ import jflex
 from jflex.effects import FlexibleLink, KelvinVoigt
 from _sim_helpers import rotor
 from test_beam import _fe_frequencies
+from _references import fe_beam_matrices
 
 MU, L, EI = 0.157, 0.8, 0.349
 
@@ -26,17 +27,7 @@ def _eig(lin):
 
 def _fe_hub(L, m, EI, Ih, ne=60, k=3):
     """FE beam whose root rotation is free and carries the hub inertia ``Ih`` (pinned hub)."""
-    h = L / ne
-    ke = EI / h**3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
-                               [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
-    me = m * h / 420 * np.array([[156, 22 * h, 54, -13 * h], [22 * h, 4 * h * h, 13 * h, -3 * h * h],
-                                 [54, 13 * h, 156, -22 * h], [-13 * h, -3 * h * h, -22 * h, 4 * h * h]])
-    n = 2 * (ne + 1)
-    K, M = np.zeros((n, n)), np.zeros((n, n))
-    for e in range(ne):
-        i = slice(2 * e, 2 * e + 4)
-        K[i, i] += ke
-        M[i, i] += me
+    K, M = fe_beam_matrices(L, m, EI, ne)
     M[1, 1] += Ih
     w2 = sl.eigh(K[1:, 1:], M[1:, 1:], eigvals_only=True)
     return np.sqrt(np.clip(w2, 0, None))[1:k + 1]
