@@ -184,7 +184,8 @@ def crba(robot: Robot, q):
             sw, sv = motion(robot, c, j)
             M[i][j] = M[j][i] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))
     dt = _dtype()
-    return jnp.stack([s.stack(row, dt) for row in M])
+    # one flat stack then a reshape: nested row stacks cost an extra interleaving pass per level
+    return s.stack([x for row in M for x in row], dt).reshape(n, n)
 
 
 # ---- ABA: 6-vectors and 6x6 matrices as lists of scalars ((w, v) ordering) ----------------

@@ -99,20 +99,23 @@ def _pair_frf(M, C, K, omega, T):
     Rr, Ri = R.real[iu, ju], R.imag[iu, ju]  # (p(p+1)/2, n)
     V = 2.0 * Rr
     U = 2.0 * (-al * Rr - be * Ri)
-    Hr, Hi = 0.0, 0.0  # (e, nf): frequency innermost, the long contiguous axis
+    ne = len(iu)
+    Hr, Hi = [0.0] * ne, [0.0] * ne  # one (nf,) array per distinct entry: contiguous loops
     for r in range(lam.shape[0]):
         A = al[r] ** 2 + be[r] ** 2 - omega**2
         B = 2.0 * al[r] * omega
         den = A * A + B * B
         dr, di = A / den, B / den
         wdr, wdi = omega * dr, omega * di
-        u, v = U[:, r, None], V[:, r, None]
-        Hr = Hr + u * dr - v * wdi
-        Hi = Hi + u * di + v * wdr
-    full = np.zeros((p, p), dtype=int)
-    full[iu, ju] = np.arange(len(iu))
-    full[ju, iu] = np.arange(len(iu))
-    return jax.lax.complex(Hr, Hi).T[:, full]
+        for e in range(ne):
+            Hr[e] = Hr[e] + U[e, r] * dr - V[e, r] * wdi
+            Hi[e] = Hi[e] + U[e, r] * di + V[e, r] * wdr
+    H = [jax.lax.complex(Hr[e], Hi[e]) for e in range(ne)]
+    index = {}
+    for k, (i, j) in enumerate(zip(iu, ju)):
+        index[i, j] = index[j, i] = k
+    # one interleaving stack into (nf, p, p) (a gather from the triangle was a slow extra pass)
+    return jnp.stack([H[index[i, j]] for i in range(p) for j in range(p)], axis=-1).reshape(omega.shape[0], p, p)
 
 
 def modal_frf(e: Eigen, omega, *, T=None):
