@@ -15,7 +15,6 @@ from .._errors import ParameterError, ShapeError
 from .._model import Model
 from ._common import check_frequencies, expand_posture, linearization, resolve_hold, tool_jacobian
 from ._modal import Eigen, check_solver, eigen
-from ._qep import qep_newton
 
 _KINDS = ("receptance", "mobility", "accelerance")
 _METHODS = ("direct", "modal")
@@ -88,8 +87,9 @@ def _pair_frf(M, C, K, omega, T):
     conj(lambda)) = 2 (U + i w V) / (|lambda|^2 - w^2 - 2 i alpha w) with V = Re R and
     U = -alpha Re R - beta Im R: real numerators and one complex reciprocal per mode and
     frequency, half the work of the 2n-pole sum."""
-    lam, psi = qep_newton(M, C, K)
-    a = 2 * lam * jnp.einsum("ir,ij,jr->r", psi, M, psi) + jnp.einsum("ir,ij,jr->r", psi, C, psi)
+    n = M.shape[0]
+    e = eigen(M, C, K, solver="newton")  # the first n pairs are the Im > 0 halves
+    lam, psi, a = e.eigenvalue[:n], e.shape[:, :n], e.a[:n]
     u = psi if T is None else T @ psi
     R = u[:, None, :] * u[None, :, :] / a  # (p, p, n)
     al, be = lam.real, lam.imag
