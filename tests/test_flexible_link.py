@@ -25,6 +25,20 @@ def _eig(lin):
     return np.sqrt(np.clip(w2, 0, None))
 
 
+def _seed001_robot():
+    """The rigid carrier of the seed-001 arm (include_rigid=False): hub rod on [0, 0.7] m, link rod
+    on [0.365, 1.065] m of the prismatic body frame, no gravity."""
+    def rod(mu, a, b):
+        m, Izz = mu * (b - a), mu * (b**3 - a**3) / 3
+        return [m, m * (a + b) / 2, 0, 0, 1e-6, 0, Izz, 0, 0, Izz]
+
+    return jflex.make_robot(
+        joint_names=["rev", "pri"], link_names=["hub", "link"], parents=[-1, 0], joint_types=["revolute", "prismatic"],
+        placement_R=np.stack([np.eye(3)] * 2), placement_p=np.zeros((2, 3)), axis=[[0, 0, 1.0], [1.0, 0, 0]],
+        inertia=np.array([rod(2.1424, 0.0, 0.7), rod(0.785, 0.365, 1.065)]), gravity=(0, 0, 0),
+    )
+
+
 def _fe_hub(L, m, EI, Ih, ne=60, k=3):
     """FE beam whose root rotation is free and carries the hub inertia ``Ih`` (pinned hub)."""
     K, M = fe_beam_matrices(L, m, EI, ne)
@@ -77,15 +91,7 @@ def test_sliding_link_on_flexible_hub_conserves_energy():
     the material-flow terms of the kinetic energy, which a wrong velocity would violate."""
     # the robot carries the rigid hub and link (include_rigid=False): hub rod on [0, 0.7] m, link
     # rod on [0.365, 1.065] m of the prismatic body frame (its free length at q = 0 is 0.365 m)
-    def rod(mu, a, b):
-        m, Izz = mu * (b - a), mu * (b**3 - a**3) / 3
-        return [m, m * (a + b) / 2, 0, 0, 1e-6, 0, Izz, 0, 0, Izz]
-
-    robot = jflex.make_robot(
-        joint_names=["rev", "pri"], link_names=["hub", "link"], parents=[-1, 0], joint_types=["revolute", "prismatic"],
-        placement_R=np.stack([np.eye(3)] * 2), placement_p=np.zeros((2, 3)), axis=[[0, 0, 1.0], [1.0, 0, 0]],
-        inertia=np.array([rod(2.1424, 0.0, 0.7), rod(0.785, 0.365, 1.065)]), gravity=(0, 0, 0),
-    )
+    robot = _seed001_robot()
     link = jflex.make_beam(0.365, 0.785, 6.33, 2)
     hub = jflex.make_beam(0.7, 2.1424, 3000.0, 1)
     eff = FlexibleLink("hub", link, sliding_joint="pri", hub=hub, include_rigid=False, name="arm")
@@ -116,15 +122,7 @@ def test_strain_output_is_minus_half_thickness_times_curvature():
 def _seed001_rigid_hub(extension=0.0, modes=2, foreshortening=False):
     """Seed-001 structure with a rigid hub: revolute hub rod [0, 0.7] m, link (0.7 m, 0.785 kg/m,
     EI 6.33 N m^2) sliding through it with free length 0.365 m + the prismatic coordinate."""
-    def rod(mu, a, b):
-        m, Izz = mu * (b - a), mu * (b**3 - a**3) / 3
-        return [m, m * (a + b) / 2, 0, 0, 1e-6, 0, Izz, 0, 0, Izz]
-
-    robot = jflex.make_robot(
-        joint_names=["rev", "pri"], link_names=["hub", "link"], parents=[-1, 0], joint_types=["revolute", "prismatic"],
-        placement_R=np.stack([np.eye(3)] * 2), placement_p=np.zeros((2, 3)), axis=[[0, 0, 1.0], [1.0, 0, 0]],
-        inertia=np.array([rod(2.1424, 0.0, 0.7), rod(0.785, 0.365, 1.065)]), gravity=(0, 0, 0),
-    )
+    robot = _seed001_robot()
     eff = FlexibleLink("hub", jflex.make_beam(0.365, 0.785, 6.33, modes), root=(0.7, 0.0, 0.0), sliding_joint="pri",
                        include_rigid=False, name="arm", foreshortening=foreshortening)
     return jflex.Model(robot, [eff])
