@@ -52,6 +52,23 @@ def _robot_yaml(folder, rob, robot, r):
     (folder / "robot.yaml").write_text(yaml.safe_dump(base, sort_keys=False))
 
 
+def _write_case(folder, rob, notes):
+    """case.yaml: the seed robot with its tabulated joint K and C as the nominal model; configuration 1
+    trains and, with 2 and 3, validates (modal tables written by the caller)."""
+    cfg = dict(
+        robot="robot.yaml", robot_inertia="inertia.npz", tool_frame="tool",
+        nominal_effects=[dict(effect="joint_flexibility", joint="all", stiffness=[float(v) for v in rob.K],
+                              damping=[float(v) for v in rob.C])],
+        datasets=[dict(kind="modal", file="modes_c1.npz", split="train", name="c1_train"),
+                  dict(kind="modal", file="modes_c1.npz", split="validation", name="c1"),
+                  dict(kind="modal", file="modes_c2.npz", split="validation", name="c2"),
+                  dict(kind="modal", file="modes_c3.npz", split="validation", name="c3")],
+        noise=dict(modal_frequency_pct=1.0),
+        notes=notes,
+    )
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+
+
 def kr90_case() -> pathlib.Path:
     rob, robot, r = _seed_robot("kuka_kr90.yaml")
     folder = CASES / "kr90_config1"
@@ -66,20 +83,9 @@ def kr90_case() -> pathlib.Path:
     for k in (1, 2):
         np.savez(folder / f"modes_c{k + 1}.npz", q0=q[k], freq=np.sort(np.array(th["frequency_exp_Hz"][k])),
                  zeta=np.array(th["damping_exp_pct"][k])[np.argsort(th["frequency_exp_Hz"][k])] / 100)
-    cfg = dict(
-        robot="robot.yaml", robot_inertia="inertia.npz", tool_frame="tool",
-        nominal_effects=[dict(effect="joint_flexibility", joint="all", stiffness=[float(v) for v in rob.K],
-                              damping=[float(v) for v in rob.C])],
-        # only configuration 1 has the fourth mode: it is both the training and a validation set
-        # (in-sample for that mode); configurations 2 and 3 are held out
-        datasets=[dict(kind="modal", file="modes_c1.npz", split="train", name="c1_train"),
-                  dict(kind="modal", file="modes_c1.npz", split="validation", name="c1"),
-                  dict(kind="modal", file="modes_c2.npz", split="validation", name="c2"),
-                  dict(kind="modal", file="modes_c3.npz", split="validation", name="c3")],
-        noise=dict(modal_frequency_pct=1.0),
-        notes="seed 003 Table 4.6 (Exp. columns) and the 19.2 Hz mode of configuration 1",
-    )
-    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    # only configuration 1 has the fourth mode: it is both the training and a validation set
+    # (in-sample for that mode); configurations 2 and 3 are held out
+    _write_case(folder, rob, "seed 003 Table 4.6 (Exp. columns) and the 19.2 Hz mode of configuration 1")
     return folder
 
 
@@ -96,18 +102,7 @@ def staubli_case() -> pathlib.Path:
         o = np.argsort(f)
         np.savez(folder / f"modes_c{k + 1}.npz", q0=np.r_[rob.postures[k], 0.0, q5[k], 0.0], joints=names,
                  freq=f[o], zeta=np.array(th["damping_exp_pct"][k])[o] / 100)
-    cfg = dict(
-        robot="robot.yaml", robot_inertia="inertia.npz", tool_frame="tool",
-        nominal_effects=[dict(effect="joint_flexibility", joint="all", stiffness=[float(v) for v in rob.K],
-                              damping=[float(v) for v in rob.C])],
-        datasets=[dict(kind="modal", file="modes_c1.npz", split="train", name="c1_train"),
-                  dict(kind="modal", file="modes_c1.npz", split="validation", name="c1"),
-                  dict(kind="modal", file="modes_c2.npz", split="validation", name="c2"),
-                  dict(kind="modal", file="modes_c3.npz", split="validation", name="c3")],
-        noise=dict(modal_frequency_pct=1.0),
-        notes="seed 003 Table 4.5 (Exp.) with the wrist posture of Table 4.1 recorded as extra joints",
-    )
-    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    _write_case(folder, rob, "seed 003 Table 4.5 (Exp.) with the wrist posture of Table 4.1 recorded as extra joints")
     return folder
 
 
