@@ -142,6 +142,46 @@ def test_extra_joint_columns_are_kept(tmp_path):
     assert d.extra_joints == ("wrist",) and d.arrays["q"].shape == (N, 2) and d.arrays["tau"].shape == (N, 2)
 
 
+# --- response data sets (joint channels enter as equation error) ------------------------------------
+def test_response_validation_set_finds_planted_effect(tmp_path):
+    # validation record: applied torques exact, joint angles with 1 mrad white noise
+    folder = G.torque_case(tmp_path / "resp", "arm3", ["rotor_inertia"], seed=11, noise=0.01, angle_noise=1e-3)
+    truth = _truth(folder)["effects"][0]
+    r = diagnose(folder).result
+    assert r["responses_not_modelled"] == []
+    assert r["where"][0]["dataset"] == "resp2"
+    assert [(s["effect"], s["joint"]) for s in r["selected"]][:1] == [("rotor_inertia", truth["joint"])]
+    got = r["parameters"]["torque"][f"rotor_inertia@{truth['joint']}"]["Ia [kg m^2]"]
+    assert abs(got - truth["params"]["Ia"]) < RTOL_PARAM * truth["params"]["Ia"]
+    assert r["shrink"] > 80
+
+
+def test_response_null_case_is_within_its_propagated_noise_floor(tmp_path):
+    # differentiated angle noise is coloured: the floor propagated from the angles' noise must
+    # hold the nominal residual (an underestimated floor would raise a false alarm here)
+    folder = G.torque_case(tmp_path / "rnull", "arm3", [], seed=11, noise=0.01, angle_noise=1e-3, nominal_friction=True)
+    r = diagnose(folder).result
+    assert not r["significant"] and r["selected"] == []
+    d = next(d for d in load_case(folder).datasets if d.kind == "response")
+    assert np.allclose(d.arrays["angle_noise_rad"], 1e-3, rtol=0.15)
+    # the trajectory holds harmonics up to 0.5 Hz: the derivative filter keeps them
+    assert 1.0 < d.arrays["cutoff_hz"] < 20.0
+
+
+def test_response_without_every_joint_channel_is_reported_unused(tmp_path):
+    folder = G.torque_case(tmp_path / "rtip", "planar2", [], seed=3, n_train=1, angle_noise=1e-4)
+    z = dict(np.load(folder / "resp1.npz"))
+    z["y"], z["channels"] = z["y"][:, :1], np.array(["tip_x"])
+    np.savez(folder / "resp1.npz", **z)
+    d = next(d for d in load_case(folder).datasets if d.kind == "response")
+    assert "q" not in d.arrays
+    z["t"] = z["t"] * (1 + 0.05 * np.linspace(0, 1, len(z["t"])) ** 2)  # non-uniform sampling
+    z["y"], z["channels"] = np.zeros((len(z["t"]), 2)), np.array(["shoulder", "elbow"])
+    np.savez(folder / "resp1.npz", **z)
+    with pytest.raises(jflex.DataError, match=r"resp1\.npz: field 't': .*uniform sampling"):
+        load_case(folder)
+
+
 # --- the candidate terms are the effects' forces ---------------------------------------------------
 def test_torque_terms_equal_joint_friction_effect(rotor_case):
     c = load_case(rotor_case)

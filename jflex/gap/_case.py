@@ -216,6 +216,12 @@ def _modal(arrs, path, robot):
     return out, names
 
 
+RESPONSE_NOISE_DRAWS = 4  # noise realisations propagated into the equation error (noise floor)
+RESPONSE_CUTOFF_FACTOR = 2.0
+RESPONSE_SG_ORDER = 5
+RESPONSE_SNR = 100.0  # the motion's band ends where its spectrum falls to 100 x the angle-noise level
+
+
 def _response(arrs, path, robot):
     for k in ("t", "tau", "y", "channels"):
         if k not in arrs:
@@ -228,7 +234,79 @@ def _response(arrs, path, robot):
         raise DataError(f"{path}: fields 'tau'/'y': expected {t.size} rows (as t), got {tau.shape[0]} and {y.shape[0]}")
     if len(ch) != y.shape[1]:
         raise DataError(f"{path}: field 'channels': {len(ch)} names for {y.shape[1]} columns of 'y'")
-    return {"t": t, "tau": tau, "y": y, "channels": ch}, ()
+    if len(set(ch)) != len(ch):
+        raise DataError(f"{path}: field 'channels': names must be unique, got {list(ch)}")
+    n = robot.nq
+    if tau.shape[1] != n:
+        raise DataError(f"{path}: field 'tau': expected {n} columns (applied torques at the model joints "
+                        f"{list(robot.joint_names)}), got {tau.shape[1]}")
+    out = {"t": t, "tau": tau, "y": y, "channels": ch}
+    if all(j in ch for j in robot.joint_names):
+        out.update(_response_motion(t, tau, y, ch, path, robot))
+    return out, ()
+
+
+def _motion_band(q_raw, sig, fs):
+    """Highest frequency [Hz] where some joint's angle spectrum (Welch) stands ``RESPONSE_SNR``
+    above the white angle noise ``sig`` [rad]."""
+    from scipy.signal import welch
+
+    nper = min(len(q_raw), 1024)
+    f, P = welch(q_raw - q_raw.mean(axis=0), fs=fs, nperseg=nper, axis=0)
+    level = 2.0 * np.maximum(sig, 1e-15) ** 2 / fs  # one-sided PSD of white noise of std sig
+    above = (P > RESPONSE_SNR * level[None, :]).any(axis=1)
+    return float(f[np.flatnonzero(above)[-1]]) if above.any() else float(f[1])
+
+
+def _response_motion(t, tau, y, ch, path, robot):
+    """Joint channels of a response as an equation-error data set: measured angles smoothed and
+    differentiated (Savitzky-Golay, cubic), the applied torques as ``tau``. The window puts the
+    filter's cutoff at twice the band of the motion, the band read off the angles' spectrum
+    against their noise (:func:`_motion_band`).
+
+    The differentiation turns angle noise into coloured torque-residual noise, which the
+    residual's own high-frequency content would understate; so the noise of the angles (robust
+    spread of their second difference) is propagated instead: ``tau_repeats`` holds the applied
+    torques plus the nominal model's torque change under ``RESPONSE_NOISE_DRAWS`` redraws of it.
+    """
+    import jax
+    import jax.numpy as jnp
+    from scipy.signal import savgol_filter
+
+    from .._dynamics import rnea
+
+    if t.size < 20:
+        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        raise DataError(f"{path}: field 't': time must be strictly increasing")
+    if np.max(np.abs(dt - dt.mean())) > 0.01 * dt.mean():
+        raise DataError(f"{path}: field 't': joint-angle channels need uniform sampling (steps vary by "
+                        f"{100 * np.max(np.abs(dt - dt.mean())) / dt.mean():.1f} %, more than 1 %)")
+    h = float(dt.mean())
+    q_raw = y[:, [ch.index(j) for j in robot.joint_names]]
+    d2 = q_raw[2:] - 2 * q_raw[1:-1] + q_raw[:-2]
+    sig = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
+    fc = RESPONSE_CUTOFF_FACTOR * _motion_band(q_raw, sig, 1.0 / h)
+    # Savitzky-Golay of order p and half-width m has its -3 dB point near (p + 1) / (3.2 m - 4.6)
+    # x Nyquist (Schafer 2011)
+    p = RESPONSE_SG_ORDER
+    m = int(np.clip(((p + 1) * (0.5 / h) / fc + 4.6) / 3.2, p, (t.size - 1) // 2))
+    win = 2 * m + 1
+
+    def derive(qr):
+        return tuple(savgol_filter(qr, win, p, deriv=k, delta=h, axis=0) for k in range(3))
+
+    q, qd, qdd = derive(q_raw)
+    rng = np.random.default_rng(0)
+    f = jax.jit(jax.vmap(lambda a, b, c: rnea(robot, a, b, c)))
+    F0 = np.asarray(f(jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
+    reps = []
+    for _ in range(RESPONSE_NOISE_DRAWS):
+        qk, qdk, qddk = derive(q + sig * rng.standard_normal(q.shape))
+        reps.append(tau + np.asarray(f(jnp.asarray(qk), jnp.asarray(qdk), jnp.asarray(qddk))) - F0)
+    return {"q": q, "qd": qd, "qdd": qdd, "q_extra": np.zeros((t.size, 0)), "tau_repeats": np.stack(reps),
+            "angle_noise_rad": sig, "cutoff_hz": fc, "window_samples": win}
 
 
 _LOADERS = {"torque": _torque, "frf": _frf, "modal": _modal, "response": _response}

@@ -57,6 +57,10 @@ class State:
     added: tuple = ()
 
 
+def _is_torque(d) -> bool:
+    return d.kind == "torque" or (d.kind == "response" and "q" in d.arrays)
+
+
 # ---------------------------------------------------------------------------------------------
 class Problem:
     """Precomputed data of a case for repeated refits."""
@@ -66,11 +70,12 @@ class Problem:
         self.robot = case.robot
         self.names = tuple(self.robot.joint_names)
         self.n = self.robot.nq
-        self.ttrain = [T.torque_set(self.robot, d) for d in case.split("train", "torque")]
-        self.tval = [T.torque_set(self.robot, d) for d in case.split("validation", "torque")]
+        # responses whose channels hold every model joint enter as equation-error (torque) sets
+        self.ttrain = [T.torque_set(self.robot, d) for d in case.split("train") if _is_torque(d)]
+        self.tval = [T.torque_set(self.robot, d) for d in case.split("validation") if _is_torque(d)]
         self.ftrain = [d for d in case.datasets if d.split == "train" and d.kind in ("frf", "modal")]
         self.fval = [d for d in case.datasets if d.split == "validation" and d.kind in ("frf", "modal")]
-        self.responses = [d for d in case.datasets if d.kind == "response"]
+        self.responses = [d for d in case.datasets if d.kind == "response" and not _is_torque(d)]
         self.nominal = {(e["effect"], self.names.index(j)) for e in case.nominal_effects for j in e["joints"]}
         self.nominal_effects = case.nominal_effects
 

@@ -240,8 +240,13 @@ TORQUE_PARAM_DRAW = {
 JOINTLESS = ("payload", "sensor_delay")
 
 
-def torque_case(folder, robot_name, truths, seed, noise=0.01, nominal_friction=False, n_train=2, n_val=1):
-    """A torque case: ``truths`` list of effect names (joint chosen at random where it applies)."""
+def torque_case(folder, robot_name, truths, seed, noise=0.01, nominal_friction=False, n_train=2, n_val=1,
+                angle_noise=None):
+    """A torque case: ``truths`` list of effect names (joint chosen at random where it applies).
+
+    ``angle_noise`` [rad]: write the validation sets as ``response`` data instead, the applied
+    torques exact and the joint angles measured with that white noise.
+    """
     rng = np.random.default_rng(seed)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -283,8 +288,13 @@ def torque_case(folder, robot_name, truths, seed, noise=0.01, nominal_friction=F
     dsets = []
     for i in range(n_train + n_val):
         tt, q, qd, qdd = fourier_trajectory(n, rng)
-        tau = torque_data(robot, drawn, tt, q, qd, qdd, rng, noise, fric)
         split = "train" if i < n_train else "validation"
+        if split == "validation" and angle_noise is not None:
+            tau = torque_data(robot, drawn, tt, q, qd, qdd, rng, 0.0, fric)
+            y = q + angle_noise * rng.standard_normal(q.shape)
+            dsets.append(("response", f"resp{i}", split, dict(t=tt, tau=tau, y=y, channels=np.array(robot.joint_names))))
+            continue
+        tau = torque_data(robot, drawn, tt, q, qd, qdd, rng, noise, fric)
         dsets.append(("torque", f"traj{i}", split, dict(t=tt, q=q, qd=qd, qdd=qdd, tau=tau)))
     return write_case(folder, robot_name, dsets, nominal,
                       truth=dict(effects=truth, family="torque", robot=robot_name, noise=noise))

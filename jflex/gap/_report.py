@@ -162,7 +162,8 @@ def markdown(r: dict, plots) -> str:
         L.append(f"| {s['added'] or 'nominal'} | {s['gap']:.2f} | {s['excess']:.2f} |")
     L += ["", "## Fitted parameters of the final model", "", "```", _params(r["parameters"]), "```", ""]
     if r["responses_not_modelled"]:
-        L.append(f"Response data sets {r['responses_not_modelled']} were validated but not used (time-response residuals are not yet part of the diagnosis).")
+        L.append(f"Response data sets {r['responses_not_modelled']} were validated but not used: they lack a channel for "
+                 "some model joint, and tip channels alone are not yet part of the diagnosis.")
     L += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
     L.append(f"\n_Diagnosis took {r['seconds']:.1f} s._")
     return "\n".join(L) + "\n"
