@@ -2,6 +2,7 @@
 Gauss-Newton covariance against an independent weighted-least-squares computation, weak
 directions, interruption, and the minimiser path."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -228,3 +229,44 @@ def test_time_response_fit_recovers_hysteretic_damping():
     assert np.allclose(res.values["delta"], delta, rtol=1e-3)
     assert res.nrmse["tip:beam.tip_deflection"] < 1e-3
     assert res.timing["jacobian_evals"] <= res.steps + 1  # one residual-and-Jacobian solve per step
+
+
+class _Sine(eqx.Module):
+    omega: jnp.ndarray
+    amp: jnp.ndarray
+
+
+class _SineData(idf.AbstractData):
+    """``amp sin(omega t)`` against a record: over many periods the cost in omega has a local
+    minimum every 2 pi / t_end or so."""
+
+    t: jnp.ndarray
+    y: jnp.ndarray
+
+    def residuals(self, m):
+        return {"y": (m.amp * jnp.sin(m.omega * self.t) - self.y) / (jnp.std(self.y) * jnp.sqrt(self.t.size))}
+
+    def nrmse(self, m):
+        return {"sine:y": jnp.sqrt(jnp.sum(self.residuals(m)["y"] ** 2))}
+
+
+def test_multistart_escapes_the_local_minimum_a_single_start_lands_in():
+    t = jnp.linspace(0, 10, 200)
+    data = _SineData(t, jnp.sin(3.0 * t) + 0.05 * np.random.default_rng(0).normal(size=t.shape))
+    spec = idf.ParameterSpec([idf.Free("omega", lambda m: m.omega, transform=idf.Log()),
+                              idf.Free("amp", lambda m: m.amp, transform=idf.Log())])
+    ms = idf.MultiStart(n=24, keep=3, bounds={"omega": (1.0, 6.0), "amp": (0.5, 2.0)})
+    for start in ((1.5, 1.5), (4.5, 0.5)):  # +/-50 % off omega = 3, amp = 1
+        model = _Sine(jnp.asarray(start[0]), jnp.asarray(start[1]))
+        single = idf.fit(model, spec, data, progress=False, max_steps=60)
+        assert abs(single.values["omega"] - 3.0) > 1.0  # a side minimum
+        res = idf.fit(model, spec, data, progress=False, max_steps=60, multistart=ms)
+        assert res.result == "converged" and res.cost < 0.01 * single.cost
+        for k, v in (("omega", 3.0), ("amp", 1.0)):
+            assert abs(res.values[k] - v) < 4 * res.std[k]
+        assert len(res.multistart) == 3 and res.timing["multistart_candidates"] == 25
+        assert min(r["cost"] for r in res.multistart) == res.cost
+    with pytest.raises(jflex.ParameterError, match="MultiStart.bounds: no free parameter named \\['freq'\\]"):
+        idf.fit(model, spec, data, progress=False, multistart=idf.MultiStart(bounds={"freq": (1, 2)}))
+    with pytest.raises(jflex.ParameterError, match="lower > 0"):
+        idf.fit(model, spec, data, progress=False, multistart=idf.MultiStart(bounds={"amp": (0.0, 2.0)}))

@@ -32,6 +32,7 @@ from ._fit import (
     Free as Free,
     Identity as Identity,
     Log as Log,
+    MultiStart as MultiStart,
     ParameterSpec as ParameterSpec,
     fit as fit,
     residual_vector as residual_vector,

@@ -251,7 +251,12 @@ class FitResult:
     - ``nrmse``: dict channel -> NRMSE; ``cost`` ``0.5 |r|^2``; ``history`` of costs;
       ``steps``; ``result``: solver message; ``interrupted``; ``seconds``; ``timing``: dict with
       ``compile_s`` (first residual-and-Jacobian evaluation, mostly compilation), ``jacobian_evals``
-      and ``jacobian_run_s`` (their total run time after the first).
+      and ``jacobian_run_s`` (their total run time after the first); with ``multistart`` also
+      ``multistart_s`` (the vmapped candidate evaluation, compile included) and
+      ``multistart_candidates``.
+    - ``multistart``: with :class:`MultiStart`, one dict per local fit (candidate index, start
+      values and cost, final values and cost, steps, result); ``history``, ``steps`` and
+      ``result`` are those of the best one. Empty without.
     """
 
     model: Any
@@ -271,6 +276,7 @@ class FitResult:
     result: str
     interrupted: bool
     timing: dict = dataclasses.field(default_factory=dict)
+    multistart: list = dataclasses.field(default_factory=list)
 
     def summary(self) -> str:
         lines = [f"fit: {self.steps} steps, cost {self.cost:.6g}, {self.result}" + (" (interrupted)" if self.interrupted else "")]
@@ -297,6 +303,7 @@ class FitResult:
             "result": self.result,
             "interrupted": self.interrupted,
             "timing": dict(self.timing),
+            **({"multistart": self.multistart} if self.multistart else {}),
         }
 
 
@@ -338,6 +345,136 @@ def _gn_step(solver, u, state, args, tags):
     return u2, state2, done, res, 0.5 * jnp.sum(state2.f_info.residual**2), state2.y_eval
 
 
+@dataclasses.dataclass(frozen=True)
+class MultiStart:
+    """A cheap global stage for :func:`fit` (``multistart=MultiStart(...)``; off by default).
+
+    ``n`` candidate starts are drawn by Latin-hypercube sampling inside ``bounds``, their costs
+    ``0.5 |r|^2`` are evaluated in one vmapped call together with the given start, and the local
+    solver is run from the ``keep`` cheapest; the fit with the lowest final cost is returned.
+
+    **Arguments:**
+
+    - ``n``: number of sampled candidates (>= 1).
+    - ``keep``: number of local fits, from the cheapest candidates (the given start included).
+    - ``bounds``: dict name -> ``(lower, upper)`` in physical units (scalars or arrays of the
+      parameter's shape). Default per parameter: a :class:`Bounded` transform's own bounds; for
+      :class:`Log` ``[p0 / span, p0 * span]`` (sampled log-uniformly); for :class:`Identity`
+      ``p0 +/- (span - 1) * scale``.
+    - ``span``: see ``bounds`` (> 1).
+    - ``seed``: of the sampling.
+    """
+
+    n: int = 16
+    keep: int = 3
+    bounds: dict | None = None
+    span: float = 3.0
+    seed: int = 0
+
+    def __post_init__(self):
+        if int(self.n) < 1:
+            raise ParameterError(f"MultiStart.n must be >= 1, got {self.n}")
+        if int(self.keep) < 1:
+            raise ParameterError(f"MultiStart.keep must be >= 1, got {self.keep}")
+        if not float(self.span) > 1.0:
+            raise ParameterError(f"MultiStart.span must be > 1, got {self.span}")
+
+    def candidates(self, spec: "ParameterSpec", u0) -> np.ndarray:
+        """``(n, size)`` unconstrained starts for the bound ``spec`` about ``u0``."""
+        bounds = dict(self.bounds or {})
+        unknown = set(bounds) - {f.name for f in spec.frees}
+        if unknown:
+            raise ParameterError(f"MultiStart.bounds: no free parameter named {sorted(unknown)}; "
+                                 f"the fit has {[f.name for f in spec.frees]}")
+        rng = np.random.default_rng(self.seed)
+        n = int(self.n)
+        cols = []
+        for f, s, x in zip(spec.frees, spec.shapes, spec._split(jnp.asarray(u0))):
+            tr = f.transform
+            p0 = np.asarray(tr.forward(x), dtype=float)
+            log = isinstance(tr, Log)
+            if f.name in bounds:
+                try:
+                    lo, hi = (np.broadcast_to(np.asarray(b, dtype=float), s) for b in bounds[f.name])
+                except Exception:
+                    raise ParameterError(f"MultiStart.bounds['{f.name}'] must be (lower, upper), each a scalar or of "
+                                         f"shape {s}, got {bounds[f.name]!r}") from None
+            elif isinstance(tr, Bounded):
+                lo, hi = (np.broadcast_to(np.asarray(b, dtype=float), s) for b in (tr.lower, tr.upper))
+            elif log:
+                lo, hi = p0 / self.span, p0 * self.span
+            else:
+                half = (self.span - 1.0) * np.broadcast_to(np.asarray(getattr(tr, "scale", 1.0), dtype=float), s)
+                lo, hi = p0 - half, p0 + half
+            if not np.all(lo < hi) or (log and not np.all(lo > 0)):
+                raise ParameterError(f"MultiStart.bounds['{f.name}'] = ({lo.tolist()}, {hi.tolist()}): need lower < upper"
+                                     + (" and lower > 0 (Log transform)" if log else ""))
+            for j in range(int(np.prod(s))):
+                # Latin hypercube: one draw per stratum, strata shuffled per coordinate; strictly
+                # inside (0, 1) so that a Bounded transform's own bounds stay finite in u.
+                t = np.clip((rng.permutation(n) + rng.uniform(size=n)) / n, 1e-6, 1 - 1e-6)
+                a, b = np.ravel(lo)[j], np.ravel(hi)[j]
+                cols.append(a * (b / a) ** t if log else a + t * (b - a))
+        P = np.stack(cols, axis=1)  # physical, (n, size)
+        return np.stack([_inverse(spec, p) for p in P])
+
+
+def _inverse(spec, p):
+    """Unconstrained u of a flat physical vector ``p``."""
+    return np.concatenate([np.ravel(np.asarray(f.transform.inverse(x))) for f, x in zip(spec.frees, spec._split(jnp.asarray(p)))])
+
+
+def _as_multistart(multistart):
+    if multistart is None or multistart is False or (isinstance(multistart, int) and not isinstance(multistart, bool) and multistart == 0):
+        return None
+    if multistart is True:
+        return MultiStart()
+    if isinstance(multistart, int):
+        return MultiStart(n=multistart)
+    if isinstance(multistart, MultiStart):
+        return multistart
+    raise ParameterError(f"fit: multistart must be None, an int (number of candidates) or a MultiStart, got {multistart!r}")
+
+
+@dataclasses.dataclass
+class _Run:
+    """One local solve: the best point seen and what is kept with it."""
+
+    u: Any
+    cost: float
+    keep: Any
+    history: list
+    steps: int
+    message: str
+    interrupted: bool
+
+
+def _loop(step, state, u0, cost0, keep0, max_steps, every, callback, spec, t_start, tag=""):
+    """The step loop of every solver path: ``step(u, state) -> (u, state, done, result, cost,
+    keep)``; ``keep`` (the Gauss-Newton path's residual and Jacobian at an accepted point, else
+    ``None``) is stored with the best point. Ctrl-C ends it with the best point kept."""
+    best = _Run(u0, cost0, keep0, [cost0], 0, "max_steps reached", False)
+    u = u0
+    try:
+        for k in range(1, max_steps + 1):
+            best.steps = k
+            u, state, done, res, cost, keep = step(u, state)
+            cost = float(cost)
+            best.history.append(cost)
+            if np.isfinite(cost) and cost < best.cost:
+                best.u, best.cost, best.keep = u, cost, keep
+            if every and (k % every == 0 or bool(done)):
+                print(f"  fit{tag} step {k:4d}  cost {cost:.6e}  best {best.cost:.6e}  {time.perf_counter() - t_start:.1f} s", file=sys.stderr)
+            if callback is not None:
+                callback(k, best.cost, spec.values(best.u))
+            if bool(done):
+                best.message = "converged" if res == optx.RESULTS.successful else str(res)
+                break
+    except KeyboardInterrupt:
+        best.interrupted, best.message = True, "interrupted"
+    return best
+
+
 def fit(
     model,
     spec: ParameterSpec,
@@ -348,6 +485,7 @@ def fit(
     progress: bool | int = True,
     callback: Callable | None = None,
     weak_tol: float = 1e-6,
+    multistart: "MultiStart | int | None" = None,
 ) -> FitResult:
     """Fit the free parameters ``spec`` of ``model`` to ``data`` with an optimistix solver.
 
@@ -359,16 +497,20 @@ def fit(
     - ``solver``: an optimistix least-squares solver (default ``LevenbergMarquardt(rtol=1e-8,
       atol=1e-8)``) or minimiser (``optx.BFGS``; the cost is then ``0.5 |r|^2``). Jacobians are
       exact (forward/reverse-mode AD), never finite differences.
-    - ``max_steps``; ``progress``: print every step (or every ``progress`` steps) to stderr;
-      ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
+    - ``max_steps`` (per local solve); ``progress``: print every step (or every ``progress``
+      steps) to stderr; ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
+    - ``multistart``: ``None`` (default: one local solve from ``model``), a :class:`MultiStart`,
+      or an int ``n`` (``MultiStart(n)``): sampled starts ranked by cost in one vmapped
+      evaluation, local solves from the best few, the lowest final cost returned. For costs with
+      local minima (e.g. an amplitude-dependent frequency in a time record).
 
     Gauss-Newton-type solvers (Levenberg-Marquardt, Gauss-Newton, Dogleg) get the residual and
     its Jacobian from ONE compiled function of the parameters (``jax.jacfwd``: the p tangents
     ride along the primal in one batched solve, the parameters are traced arguments, so no
-    recompilation across steps) that is evaluated outside the solver's step; the same values
-    serve the start check, every step and the final report. (Letting the solver ``jax.linearize``
-    a time simulation instead re-runs the whole ODE loop for every Jacobian column batch and
-    compiles the solve three times into each step.)
+    recompilation across steps or starts) that is evaluated outside the solver's step; the same
+    values serve the start check, every step and the final report. (Letting the solver
+    ``jax.linearize`` a time simulation instead re-runs the whole ODE loop for every Jacobian
+    column batch and compiles the solve three times into each step.)
 
     Ctrl-C stops the loop: the best parameters seen are kept and ``interrupted`` is set.
 
@@ -378,6 +520,7 @@ def fit(
     pair = (model, data)
     spec = spec.bind(pair)
     solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
+    ms = _as_multistart(multistart)
     u0 = spec.pack(pair)
 
     def resid_parts(u):
@@ -389,77 +532,115 @@ def fit(
     def resid(u, args):
         return resid_parts(u)[0]
 
+    def cost_of(u):
+        return 0.5 * jnp.sum(resid(u, None) ** 2)
+
     is_min = isinstance(solver, optx.AbstractMinimiser)
     every = int(progress) if progress and not isinstance(progress, bool) else (1 if progress else 0)
     timing = {}
-    if is_min or not isinstance(solver, optx.AbstractGaussNewton):
-        return _fit_generic(pair, spec, solver, resid, u0, is_min, max_steps, every, callback, weak_tol)
-
-    @eqx.filter_jit
-    def r_and_jac(u):
-        def g(v):
-            r, parts = resid_parts(v)
-            return r, (r, parts)
-
-        J, (r, parts) = jax.jacfwd(g, has_aux=True)(u)
-        return r, J, parts
-
-    cache = {}
-
-    def evaluate(u):
-        key = np.asarray(u).tobytes()
-        if key not in cache:
-            t0 = time.perf_counter()
-            out = jax.block_until_ready(r_and_jac(u))
-            dt = time.perf_counter() - t0
-            if "compile_s" not in timing:
-                timing.update(compile_s=dt, jacobian_evals=1, jacobian_run_s=0.0)
-            else:
-                timing["jacobian_evals"] += 1
-                timing["jacobian_run_s"] += dt
-            cache.clear()  # the solver needs the latest; the best one is kept apart
-            cache[key] = out
-        return cache[key]
-
     t_start = time.perf_counter()
-    r0, J0, parts0 = evaluate(u0)
-    cost0 = float(0.5 * jnp.sum(r0**2))
-    if not np.isfinite(cost0):
-        raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
     tags = frozenset()
-    state = _gn_init(solver, u0, r0, tags)
-    best_u, best_cost, history = u0, cost0, [cost0]
-    best_eval = (r0, J0, parts0)
-    u, k, interrupted, message = u0, 0, False, "max_steps reached"
-    y_eval = u0
-    try:
-        for k in range(1, max_steps + 1):
-            ev, y_ev = evaluate(y_eval), y_eval
-            u, state, done, res, cost, y_eval = _gn_step(solver, u, state, (ev[0], ev[1], y_ev), tags)
-            cost = float(cost)
-            history.append(cost)
-            if np.isfinite(cost) and cost < best_cost:
-                # an accepted step moves to the point just evaluated
-                best_u, best_cost = u, cost
-                best_eval = ev if np.array_equal(np.asarray(u), np.asarray(y_ev)) else None
-            if every and (k % every == 0 or bool(done)):
-                print(f"  fit step {k:4d}  cost {cost:.6e}  best {best_cost:.6e}  {time.perf_counter() - t_start:.1f} s", file=sys.stderr)
-            if callback is not None:
-                callback(k, best_cost, spec.values(best_u))
-            if bool(done):
-                message = "converged" if res == optx.RESULTS.successful else str(res)
-                break
-    except KeyboardInterrupt:
-        interrupted, message = True, "interrupted"
+    gauss_newton = not is_min and isinstance(solver, optx.AbstractGaussNewton)
+    if gauss_newton:
+        @eqx.filter_jit
+        def r_and_jac(u):
+            def g(v):
+                r, parts = resid_parts(v)
+                return r, (r, parts)
+
+            J, (r, parts) = jax.jacfwd(g, has_aux=True)(u)
+            return r, J, parts
+
+        cache = {}
+
+        def evaluate(u):
+            key = np.asarray(u).tobytes()
+            if key not in cache:
+                t0 = time.perf_counter()
+                out = jax.block_until_ready(r_and_jac(u))
+                dt = time.perf_counter() - t0
+                if "compile_s" not in timing:
+                    timing.update(compile_s=dt, jacobian_evals=1, jacobian_run_s=0.0)
+                else:
+                    timing["jacobian_evals"] += 1
+                    timing["jacobian_run_s"] += dt
+                cache.clear()  # the solver needs the latest; the best one is kept apart
+                cache[key] = out
+            return cache[key]
+
+        def start(u):
+            ev = evaluate(u)
+            return float(0.5 * jnp.sum(ev[0] ** 2)), ev, (_gn_init(solver, u, ev[0], tags), u)
+
+        def step(u, st):
+            state, y_ev = st
+            ev = evaluate(y_ev)
+            u2, state2, done, res, cost, y_next = _gn_step(solver, u, state, (ev[0], ev[1], y_ev), tags)
+            # an accepted step moves to the point just evaluated: its Jacobian is the one to report
+            keep = ev if np.array_equal(np.asarray(u2), np.asarray(y_ev)) else None
+            return u2, (state2, y_next), done, res, cost, keep
+    else:
+        fn = (lambda u, a: (cost_of(u), None)) if is_min else (lambda u, a: (resid(u, a), None))
+        f_struct, aux_struct = jax.eval_shape(lambda: fn(u0, None))
+        init = eqx.filter_jit(lambda u: solver.init(fn, u, None, {}, f_struct, aux_struct, tags))
+        cost_jit = eqx.filter_jit(cost_of)
+
+        @eqx.filter_jit
+        def _step(u, state):
+            u2, state2, _ = solver.step(fn, u, None, {}, state, tags)
+            done, res = solver.terminate(fn, u2, None, {}, state2, tags)
+            return u2, state2, done, res, cost_of(u2)
+
+        def start(u):
+            return float(cost_jit(u)), None, init(u)
+
+        def step(u, state):
+            return (*_step(u, state), None)
+
+    starts, ms_report = [u0], []
+    if ms is not None:
+        t0 = time.perf_counter()
+        U = jnp.concatenate([u0[None], jnp.asarray(ms.candidates(spec, u0))])
+        costs = np.asarray(eqx.filter_jit(jax.vmap(cost_of))(U))
+        costs = np.where(np.isfinite(costs), costs, np.inf)
+        order = [int(i) for i in np.argsort(costs, kind="stable") if np.isfinite(costs[i])][: int(ms.keep)]
+        timing["multistart_s"] = time.perf_counter() - t0
+        timing["multistart_candidates"] = int(U.shape[0])
+        if not order:
+            raise ParameterError("fit: the residual is not finite at any multistart candidate; check the start model, the data and MultiStart.bounds")
+        starts = [U[i] for i in order]
+        ms_report = [{"candidate": i, "start": {k: np.asarray(v).tolist() for k, v in spec.values(U[i]).items()},
+                      "start_cost": float(costs[i])} for i in order]
+        if every:
+            print(f"  multistart: {U.shape[0]} candidates in {timing['multistart_s']:.1f} s, local fits from costs "
+                  + ", ".join(f"{costs[i]:.3e}" for i in order), file=sys.stderr)
+
+    best = None
+    for i, us in enumerate(starts):
+        cost0, keep0, state = start(us)
+        if not np.isfinite(cost0):
+            raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
+        run = _loop(step, state, us, cost0, keep0, max_steps, every, callback, spec, t_start, f" [start {i}]" if ms is not None else "")
+        if ms_report:
+            ms_report[i].update(cost=run.cost, steps=run.steps, result=run.message,
+                                values={k: np.asarray(v).tolist() for k, v in spec.values(run.u).items()})
+        if best is None or run.cost < best.cost:
+            best = run
+        if run.interrupted:
+            best.interrupted, best.message = True, "interrupted"
+            break
     seconds = time.perf_counter() - t_start
-    if best_eval is None:
-        best_eval = evaluate(best_u)
+    if not gauss_newton:
+        return _report(pair, spec, best.u, best.cost, best.history, best.steps, seconds, best.message, best.interrupted,
+                       weak_tol, timing=timing, multistart=ms_report)
+    if best.keep is None:
+        best.keep = evaluate(best.u)
     timing["total_s"] = time.perf_counter() - t_start
-    r, J_u, parts = best_eval
-    nrmse = _nrmse_of(pair, spec, best_u, parts)
-    n_data = r.shape[0] - spec.prior_residuals(best_u).shape[0]  # the prior rows are folded in by _report
-    return _report(pair, spec, best_u, best_cost, history, k, seconds, message, interrupted, weak_tol,
-                   pre=(np.asarray(J_u)[:n_data], np.asarray(r)[:n_data], nrmse), timing=timing)
+    r, J_u, parts = best.keep
+    nrmse = _nrmse_of(pair, spec, best.u, parts)
+    n_data = r.shape[0] - spec.prior_residuals(best.u).shape[0]  # the prior rows are folded in by _report
+    return _report(pair, spec, best.u, best.cost, best.history, best.steps, seconds, best.message, best.interrupted, weak_tol,
+                   pre=(np.asarray(J_u)[:n_data], np.asarray(r)[:n_data], nrmse), timing=timing, multistart=ms_report)
 
 
 def _nrmse_of(pair, spec, u, parts):
@@ -484,47 +665,7 @@ def _nrmse_of(pair, spec, u, parts):
     return out
 
 
-def _fit_generic(pair, spec, solver, resid, u0, is_min, max_steps, every, callback, weak_tol):
-    """Any other optimistix solver (minimisers): the solver evaluates the residual itself."""
-    fn = (lambda u, a: (0.5 * jnp.sum(resid(u, a) ** 2), None)) if is_min else (lambda u, a: (resid(u, a), None))
-    tags = frozenset()
-    f_struct, aux_struct = jax.eval_shape(lambda: fn(u0, None))
-    state = eqx.filter_jit(lambda u: solver.init(fn, u, None, {}, f_struct, aux_struct, tags))(u0)
-
-    @eqx.filter_jit
-    def step(u, state):
-        u2, state2, _ = solver.step(fn, u, None, {}, state, tags)
-        done, res = solver.terminate(fn, u2, None, {}, state2, tags)
-        r = resid(u2, None)
-        return u2, state2, done, res, 0.5 * jnp.sum(r**2)
-
-    cost0 = float(eqx.filter_jit(lambda u: 0.5 * jnp.sum(resid(u, None) ** 2))(u0))
-    if not np.isfinite(cost0):
-        raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
-    best_u, best_cost, history = u0, cost0, [cost0]
-    u, k, interrupted, message = u0, 0, False, "max_steps reached"
-    t_start = time.perf_counter()
-    try:
-        for k in range(1, max_steps + 1):
-            u, state, done, res, cost = step(u, state)
-            cost = float(cost)
-            history.append(cost)
-            if np.isfinite(cost) and cost < best_cost:
-                best_u, best_cost = u, cost
-            if every and (k % every == 0 or bool(done)):
-                print(f"  fit step {k:4d}  cost {cost:.6e}  best {best_cost:.6e}  {time.perf_counter() - t_start:.1f} s", file=sys.stderr)
-            if callback is not None:
-                callback(k, best_cost, spec.values(best_u))
-            if bool(done):
-                message = "converged" if res == optx.RESULTS.successful else str(res)
-                break
-    except KeyboardInterrupt:
-        interrupted, message = True, "interrupted"
-    seconds = time.perf_counter() - t_start
-    return _report(pair, spec, best_u, best_cost, history, k, seconds, message, interrupted, weak_tol)
-
-
-def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, weak_tol, pre=None, timing=None):
+def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, weak_tol, pre=None, timing=None, multistart=()):
     """``pre``: ``(J_u, r, nrmse)`` already known at ``u`` (Jacobian w.r.t. the optimisation
     variables u, data residuals without the prior rows); otherwise computed here."""
     p = spec.physical(u)
@@ -581,5 +722,5 @@ def _report(pair, spec, u, cost, history, steps, seconds, message, interrupted, 
     return FitResult(
         model=fitted, data=fitted_data, u=u, values=spec.values(u), std=std, covariance=cov, singular_values=sv, nrmse=nrmse,
         cost=float(cost), history=history, steps=int(steps), seconds=float(seconds), labels=labels,
-        weak_directions=weak, result=message, interrupted=interrupted, timing=dict(timing or {}),
+        weak_directions=weak, result=message, interrupted=interrupted, timing=dict(timing or {}), multistart=list(multistart),
     )
