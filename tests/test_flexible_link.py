@@ -313,3 +313,22 @@ def test_foreshortening_power_balance_sliding_link_on_flexible_hub():
 
     E, dE = energy_rate(model, jnp.array([0.3, 0.05, 3e-3, 2e-2, -3e-3]), jnp.array([1.2, 0.06, 0.1, -0.05, 0.2]))
     assert abs(float(dE)) < 1e-12 * float(E)
+
+
+def test_tip_frf_of_a_flexible_link_includes_its_deflection():
+    # joint held: the beam is a cantilever; its tip receptance tends to the static compliance
+    # L^3 / (3 EI) and peaks at the first clamped frequency 1.875^2 sqrt(EI / (mu L^4))
+    model = jflex.Model(rotor(0.02), [FlexibleLink("hub", jflex.make_beam(L, MU, EI, 4), damping=KelvinVoigt(1e-3))])
+    q0 = jnp.zeros(1)
+    w1 = 1.8751**2 * np.sqrt(EI / (MU * L**4))
+    omega = jnp.array([1e-3 * w1, 0.999 * w1, w1, 1.001 * w1])
+    frf = eqx.filter_jit(jflex.frf)
+    G = np.asarray(frf(model, q0, omega, hold=("j1",), frame="beam.tip_position"))
+    np.testing.assert_allclose(G[0, 1, 1].real, L**3 / (3 * EI), rtol=2e-3)  # 4 modes: 0.9993 of it
+    assert np.abs(G[0, 0, 0]) < 1e-6 * np.abs(G[0, 1, 1])  # no axial compliance (no foreshortening)
+    peak = np.abs(G[1:, 1, 1])
+    assert peak[1] > peak[0] and peak[1] > peak[2]
+    # a rigid frame on the hub is not carried by the beam's modes
+    assert np.all(np.asarray(frf(model, q0, omega, hold=("j1",), frame="hub")) == 0)
+    with pytest.raises(jflex.ShapeError, match="effect output"):
+        frf(model, q0, omega, hold=("j1",), frame="beam.tip_position", components="full")

@@ -75,15 +75,39 @@ def linearization(model: Model, posture, hold=()):
     return x0, linearize(model, x0, hold=resolve_hold(model, hold))
 
 
+def _effect_output(model: Model, name: str):
+    """``x -> value`` of an effect output such as ``"beam.tip_position"``, or None."""
+    r, lay = model.rigid, model.layout
+    zx, zz = jnp.zeros(lay.nx), jnp.zeros(lay.nz)
+    for e, s in zip(model.effects, lay.slots):
+        if e.output(r, s, name, zx, zx, zz) is not None:
+            return lambda x, e=e, s=s: e.output(r, s, name, x, zx, zz)
+    return None
+
+
 def tool_jacobian(model: Model, x0, keep, frame, reference: str, components: str):
     """Jacobian (3 or 6, len(keep)) of ``frame`` with respect to the kept coordinates.
 
-    Only robot joint coordinates move the frame; other kept coordinates get zero columns.
+    A rigid frame moves with the robot joint coordinates only (other kept coordinates get zero
+    columns: an effect's coordinates, e.g. a beam's modes, do not carry the robot's frames). An
+    effect output naming a point, e.g. ``"beam.tip_position"`` (world position of a flexible
+    link's tip), is differentiated with respect to every coordinate, so its FRF includes the
+    link's deflection; it has a translational Jacobian in world axes only.
     """
     if components not in ("linear", "angular", "full"):
         raise ShapeError(f"components must be 'linear', 'angular' or 'full', got '{components}'")
     r = model.rigid
     n = r.nq
+    if isinstance(frame, str) and frame not in r.link_names and frame not in r.frame_names \
+            and frame not in r.joint_names:
+        out = _effect_output(model, frame)
+        if out is not None:
+            if components != "linear" or reference != "local_world_aligned":
+                raise ShapeError(
+                    f"frame '{frame}' is an effect output (a point): only components='linear' with "
+                    f"reference='local_world_aligned' apply, got components='{components}', reference='{reference}'")
+            J = jnp.atleast_2d(jax.jacfwd(out)(x0))
+            return J[:, jnp.array(keep, dtype=int)]
     J = jacobian(r, x0[:n], frame, reference)
     J = {"linear": J[:3], "angular": J[3:], "full": J}[components]
     cols = [J[:, i] if i < n else jnp.zeros(J.shape[0], J.dtype) for i in keep]

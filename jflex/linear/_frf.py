@@ -147,7 +147,9 @@ def frf(
     - ``omega``: (nf,) angular frequencies [rad/s]; finite, >= 0, strictly increasing.
     - ``frame``: None for the joint-space FRF over the kept coordinates; a frame name (e.g.
       ``"tool"``) for ``G_X = J G J^T`` with ``reference`` / ``components`` as in
-      :func:`jflex.jacobian` (``"linear"``: the 3x3 translational FRF of Eq. 4.8).
+      :func:`jflex.jacobian` (``"linear"``: the 3x3 translational FRF of Eq. 4.8); or an
+      effect output naming a point, e.g. ``"beam.tip_position"`` of a flexible link, whose FRF
+      includes the link's deflection (a rigid frame is not carried by a beam's modes).
     - ``kind``: ``"receptance"`` [m/N, rad/(N m)], ``"mobility"`` (x i w) or
       ``"accelerance"`` (x -w^2).
     - ``method``: ``"direct"`` (inverse of the dynamic stiffness, including frequency-dependent

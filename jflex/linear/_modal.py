@@ -157,7 +157,8 @@ def modal_analysis(
       names or glob patterns such as ``"theta_*"``, or ``()`` (free, the default).
     - ``frame``: optional frame (e.g. ``"tool"``) at which to express the mode shapes through
       its Jacobian; ``reference`` and ``components`` (``"linear"``, ``"angular"``, ``"full"``)
-      as in :func:`jflex.jacobian`.
+      as in :func:`jflex.jacobian`; or an effect output naming a point (``"beam.tip_position"``),
+      which moves with the beam's modes too.
     - ``solver``: ``"eig"`` (any damping) or ``"newton"`` (underdamped modes, several times
       faster in posture sweeps; raises where it does not converge), see :func:`eigen`.
 
