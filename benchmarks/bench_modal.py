@@ -27,6 +27,8 @@ p.add_argument("--baseline-n", type=int, default=0, help="postures timed for the
 p.add_argument("--host-devices", type=int, default=1, help="CPU devices jflex.sweep shards over")
 p.add_argument("--chunk", type=int, default=8192)
 p.add_argument("--frf-chunk", type=int, default=64, help="postures per FRF call (32 MB outputs per call cost 1.5-2x here)")
+p.add_argument("--no-tune-allocator", action="store_true",
+               help="leave glibc's malloc thresholds as they are (default: jflex.tune_allocator() for the whole process)")
 p.add_argument("--with-eig", action="store_true",
                help="also time solver='eig' (jnp.linalg.eig); on jax 0.10.2 CPU its batched runs stall at random")
 args = p.parse_args()
@@ -115,7 +117,10 @@ def timed(f):
 
 
 rows = []
-print(f"jax {jax.__version__}, devices {jax.devices()}")
+# both loops run under the same allocator settings (one process); without them a chunk's outputs
+# page-fault afresh on some runs and not others (jflex/_allocator.py)
+tuned = False if args.no_tune_allocator else jflex.tune_allocator()
+print(f"jax {jax.__version__}, devices {jax.devices()}, jflex.tune_allocator(): {tuned}")
 
 # ---- 1. modal analysis ----------------------------------------------------------------------
 N = args.modal_n

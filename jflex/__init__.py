@@ -87,6 +87,7 @@ from ._model import (
     state_rate as state_rate,
 )
 from ._sweep import batched as batched, sweep as sweep
+from ._allocator import tune_allocator as tune_allocator
 from ._config import (
     available_robots as available_robots,
     load_robot as load_robot,

@@ -23,7 +23,15 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from ._allocator import tune_allocator
 from ._errors import ShapeError
+
+
+def _tune_allocator_once():
+    # batch outputs of a few MB per call otherwise page-fault afresh on many calls (see
+    # jflex/_allocator.py); JFLEX_TUNE_ALLOCATOR=0 leaves glibc's defaults
+    if os.environ.get("JFLEX_TUNE_ALLOCATOR", "1") != "0":
+        tune_allocator()
 
 
 def _progress(done, total, t0, label):
@@ -45,7 +53,10 @@ def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True):
     ``fuse=False`` compiles without XLA's fusion pass (CPU only), which is fastest for the long
     elementwise rigid-body kernels (``rnea``, ``crba``, ``aba``, ``regressor``); keep the default
     ``True`` for anything else. Measured in ``benchmarks/bench_dynamics.py``.
+
+    Like :func:`sweep`, it calls :func:`jflex.tune_allocator` (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
     """
+    _tune_allocator_once()
     opts = None if fuse or jax.default_backend() != "cpu" else {"xla_disable_hlo_passes": "fusion"}
 
     def run(*args):
@@ -80,7 +91,11 @@ def sweep(
     - ``devices``: devices to shard each chunk over (default ``jax.devices()``).
 
     **Returns:** the outputs for all N items as NumPy arrays (same pytree structure as ``fn``'s).
+
+    Calls :func:`jflex.tune_allocator` first (``JFLEX_TUNE_ALLOCATOR=0`` opts out): each chunk's
+    outputs are then served from reused heap memory instead of fresh pages.
     """
+    _tune_allocator_once()
     leaves = jax.tree_util.tree_leaves(args)
     if not leaves:
         raise ShapeError("sweep: needs at least one batched array argument")
