@@ -4,11 +4,27 @@
    positions filtered and differentiated spectrally, noisy torques; OLS and WLS of the base
    parameters (friction and gravity-compensator terms included) against the planted values,
    then a physically consistent full set (log-Cholesky) lifted from them.
-2. Flexible joints (output error): multi-posture tool FRFs with 2 % noise, K and C fitted from a
-   +/-50 % start.
-3. A flexible link: tip free vibration with Kelvin-Voigt damping, EI and k_e fitted from +/-50 %.
+   The same motion and noisy torques also feed an output-error fit (``TorqueData``) of the
+   friction and two first moments of link 3 from +/-50 % starts.
+2. Flexible joints (output error): multi-posture tool FRFs with 2 % noise, K and C fitted.
+3. A flexible link: tip free vibration with Kelvin-Voigt damping, EI and k_e fitted.
 
-Each case reports the error of every parameter in units of its reported standard deviation.
+Every output-error fit is repeated from several starts, each parameter +50 % or -50 % off its
+planted value: all +50 %, all -50 %, and sign patterns drawn at random (``starts`` in the
+config). A parameter counts as recovered when |estimate - truth| < ``tolerance_std`` standard
+deviations of the reported Gauss-Newton covariance (s^2 (J^T J)^-1); every start records start,
+truth, estimate, std, error (absolute, in std, in %), iterations and time.
+
+The fits use ``jflex.identify.levenberg_marquardt`` (trust region grown at a gain ratio of 0.75):
+with optimistix's default (0.99) the flexible-link fit from +50 %/-50 % was still creeping after
+60 iterations (k_e twice the truth, 13 std off).
+
+Outcome (last run, seed 0; iterations and wall time per start, the first including compilation):
+rigid + friction: OLS / WLS of 24 base parameters within 2.2 / 2.3 std; output error (Fv, Fc,
+m3 c3x, m3 c3y) from 5 starts, all converged to the same point in 17-19 iterations (1-3 s), max
+error 2.0 std (1.8 %, Fc of joint 2). Flexible joints (K, C) from 6 starts: 14-29 iterations
+(1.4-2.8 s), max error 0.71 std (0.2 %). Flexible link (EI, k_e) from all 4 sign patterns:
+18-41 iterations (45-116 s), EI +0.002 %, k_e -0.67 % (0.25 std). Every parameter within 4 std.
 
     python experiments/identify_synthetic.py [CONFIG] [--out DIR]
 """
@@ -33,6 +49,44 @@ DEFAULT = ROOT / "configs" / "identify_synthetic.yaml"
 DH = [[0, 0, 0.642, 0], [np.pi / 2, 0.25, 0, 0], [0, 0.95, 0, 0]]
 
 
+def start_factors(n, c, rng):
+    """(label, factors) of the starts of a fit of ``n`` scalars: every parameter x1.5 or x0.5."""
+    out = [("+50 %", np.full(n, 1.5)), ("-50 %", np.full(n, 0.5))]
+    seen = {tuple(f) for _, f in out}
+    want = int(c.get("random", 0))
+    for _ in range(200 * (want + 1)):
+        if len(out) >= 2 + want or len(seen) >= 2**n:
+            break
+        f = np.where(rng.uniform(size=n) < 0.5, 0.5, 1.5)
+        if tuple(f) not in seen:
+            seen.add(tuple(f))
+            out.append(("mixed " + "".join("+" if x > 1 else "-" for x in f), f))
+    return out
+
+
+def recover(name, true, spec, data, starts, tol_std, solver, max_steps):
+    """Fit ``spec`` from every start (truth times its factors); one row per start."""
+    b = spec.bind(true)
+    truth = np.asarray(b.physical(b.pack(true)))
+    rows = []
+    for label, f in starts:
+        start = b.apply(true, jnp.asarray(truth * f), physical=True)
+        res = idf.fit(start, spec, data, solver, max_steps=max_steps, progress=False)
+        est = np.concatenate([np.ravel(res.values[k]) for k in res.values])
+        std = np.concatenate([np.ravel(res.std[k]) for k in res.std])
+        err = est - truth
+        z = err / std
+        ok = bool(np.all(np.abs(z) < tol_std)) and res.result == "converged"
+        rows.append({"start_label": label, "labels": list(res.labels), "start": (truth * f).tolist(), "truth": truth.tolist(),
+                     "estimate": est.tolist(), "std": std.tolist(), "error": err.tolist(), "error_in_std": z.tolist(),
+                     "error_pct": (100 * err / truth).tolist(), "iterations": res.steps, "result": res.result,
+                     "seconds": res.seconds, "compile_s": res.timing.get("compile_s"), "nrmse": res.nrmse,
+                     "singular_values": res.singular_values.tolist(), "within_tolerance": ok})
+        print(f"{name} from {label:>12s}: max |error| {np.abs(z).max():.2f} std ({np.abs(100 * err / truth).max():.3g} %), "
+              f"{res.steps} it, {res.seconds:.1f} s, {res.result} -> {'recovered' if ok else 'NOT recovered'}")
+    return {"tolerance_std": tol_std, "starts": rows, "all_recovered": all(r["within_tolerance"] for r in rows), "last_fit": res}
+
+
 def arm():
     inert = [{"mass": 60.0, "com": [0.0, -0.05, -0.2], "inertia": [4.0, 0.1, 3.5, 0.0, 0.2, 3.0]},
              {"mass": 45.0, "com": [0.45, 0.02, 0.1], "inertia": [0.6, 0.05, 4.0, 0.1, 0.0, 4.2]},
@@ -41,7 +95,7 @@ def arm():
                          lower=[-2.5, -0.5, -2.2], upper=[0.5, 2.6, 0.1], velocity_limit=[2.6, 2.6, 2.6])
 
 
-def rigid_friction(c, rng, run_dir):
+def rigid_friction(c, rng, run_dir, common):
     robot = arm()
     fv, fc, B = (np.asarray(c[k], float) for k in ("viscous_N_m_s_per_rad", "coulomb_N_m", "compensator_N_m"))
     reg = idf.Regressor(compensator=(1, 3))
@@ -74,9 +128,10 @@ def rigid_friction(c, rng, run_dir):
            "excitation_max_violation": design.max_violation}
     for name, res in (("ols", idf.ols(A, taf.ravel())), ("wls", idf.wls(A, taf.ravel(), 3))):
         z = (res.theta - truth) / res.std
+        big = np.abs(truth) > 1e-6 * np.abs(truth).max()  # a relative error of a base parameter that is ~0 means nothing
         out[name] = {"max_abs_error_in_std": float(np.abs(z).max()), "fraction_within_2_std": float(np.mean(np.abs(z) < 2)),
-                     "max_relative_error_pct": float(np.max(np.abs(res.theta - truth) / np.maximum(np.abs(truth), 1e-9)) * 100),
-                     "cond": res.cond}
+                     "max_relative_error_pct": float(np.max(np.abs(res.theta - truth)[big] / np.abs(truth[big])) * 100),
+                     "within_tolerance": bool(np.abs(z).max() < common["tolerance_std"]), "cond": res.cond}
         print(f"rigid+friction {name}: max |error| = {out[name]['max_abs_error_in_std']:.2f} std, "
               f"{100 * out[name]['fraction_within_2_std']:.0f} % within 2 std")
     # Physically consistent full set from the WLS base parameters, with a CAD prior off by 30 %.
@@ -86,6 +141,22 @@ def rigid_friction(c, rng, run_dir):
     lift = idf.physical_fit(bp.matrix(), psi, 3, prior=prior, prior_weight=1e-4)
     out["physical_lift"] = {"consistent": [bool(idf.is_consistent(p)) for p in lift.inertia],
                             "max_base_mismatch_relative": float(np.abs(np.asarray(bp.project(lift.theta)) - psi).max() / np.abs(psi).max())}
+    # Output error on the same motion: torques of a jflex model with (smoothed) Coulomb friction,
+    # the noisy, spectrally differentiated positions as the fit's motion (errors in variables).
+    fric = lambda fv_, fc_: jflex.effects.JointFriction(robot.joint_names, viscous=fv_, coulomb=fc_, stribeck_velocity=1e-6, smoothing=1e-3)
+    true = jflex.Model(robot, [fric(fv, fc)])
+    z0 = jnp.zeros(true.nz)
+    tau_oe = np.asarray(jax.jit(jax.vmap(lambda a, b_, d: jflex.model_inverse_dynamics(true, 0.0, a, b_, d, z0)))(q, qd, qdd))
+    data = idf.TorqueData(qf, qdf, qddf, tau_oe + rng.normal(size=tau_oe.shape) * sig)
+    spec = idf.ParameterSpec([idf.Free("Fv", lambda m: m.effects[0].viscous, transform=idf.Log()),
+                              idf.Free("Fc", lambda m: m.effects[0].coulomb, transform=idf.Log()),
+                              idf.Free("m3c3x", lambda m: m.robot.inertia, index=(2, 1)),
+                              idf.Free("m3c3y", lambda m: m.robot.inertia, index=(2, 2))])
+    n = spec.bind(true).size
+    rec = recover("rigid+friction (output error)", true, spec, data, start_factors(n, common["starts"], rng), common["tolerance_std"],
+                  idf.levenberg_marquardt(float(common["lm_tol"]), float(common["lm_tol"])), common["max_steps"])
+    rec.pop("last_fit")
+    out["output_error"] = rec
     fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     ax[0].plot(t, q)
     ax[0].set_ylabel("q [rad]")
@@ -98,7 +169,7 @@ def rigid_friction(c, rng, run_dir):
     return out
 
 
-def flexible_joints(c, rng, max_steps):
+def flexible_joints(c, rng, common):
     robot = arm()
     K, C = np.asarray(c["stiffness_N_m_per_rad"], float), np.asarray(c["damping_N_m_s_per_rad"], float)
     mk = lambda K, C: jflex.Model(robot, [jflex.effects.FlexibleJoints(K, C, rotor_inertia=[1e-3] * 3, gear_ratio=[100.0] * 3, coupling=False)])
@@ -111,12 +182,12 @@ def flexible_joints(c, rng, max_steps):
     data = idf.FRFData(post, omega, Hn, frame="tool")
     spec = idf.ParameterSpec([idf.Free("K", lambda m: m.effects[0].stiffness, transform=idf.Log()),
                               idf.Free("C", lambda m: m.effects[0].damping, transform=idf.Log())])
-    res = idf.fit(mk(K * [1.5, 0.5, 1.5], C * [0.5, 1.5, 0.5]), spec, data, max_steps=max_steps, progress=10)
-    zK = (res.values["K"] - K) / res.std["K"]
-    zC = (res.values["C"] - C) / res.std["C"]
-    print(f"flexible joints: K error {np.round(zK, 2)} std, C error {np.round(zC, 2)} std")
-    return {"fit": res.to_dict(), "K_error_in_std": zK, "C_error_in_std": zC,
-            "K_relative_error_pct": 100 * (res.values["K"] - K) / K, "C_relative_error_pct": 100 * (res.values["C"] - C) / C}
+    starts = start_factors(6, common["starts"], rng)
+    starts.insert(2, ("alternating", np.array([1.5, 0.5, 1.5, 0.5, 1.5, 0.5])))
+    rec = recover("flexible joints", mk(K, C), spec, data, starts, common["tolerance_std"],
+                  idf.levenberg_marquardt(float(common["lm_tol"]), float(common["lm_tol"])), common["max_steps"])
+    rec.pop("last_fit")
+    return rec
 
 
 class ServoHold(jflex.effects.AbstractEffect):
@@ -128,7 +199,7 @@ class ServoHold(jflex.effects.AbstractEffect):
         return 0.5 * self.kp * x[0] ** 2
 
 
-def flexible_link(c, rng, max_steps, run_dir):
+def flexible_link(c, rng, common, run_dir):
     robot = jflex.make_robot(joint_names=["hub"], link_names=["hub"], parents=[-1], joint_types=["revolute"],
                              placement_R=np.eye(3)[None], placement_p=np.zeros((1, 3)), axis=[[0, 0, 1.0]],
                              inertia=np.array([[1e-3, 0, 0, 0, 1e-6, 0, 1e-3, 0, 0, 1e-3]]), gravity=(0, 0, -9.81))
@@ -142,34 +213,45 @@ def flexible_link(c, rng, max_steps, run_dir):
     ts = np.linspace(0, float(c["t_end_s"]), int(c["samples"]), endpoint=False)
     x0 = np.zeros(true.nx)
     x0[1] = float(c["initial_tip_m"])  # first assumed mode, phi(1) = 1
-    kw = dict(rtol=1e-8, atol=1e-10)
-    y = np.asarray(jflex.simulate(true, ts, x0=jnp.asarray(x0), outputs=("beam.tip_deflection",), **kw)["beam.tip_deflection"])
+    kw_true = dict(rtol=float(c["truth_rtol"]), atol=float(c["truth_atol"]))
+    y = np.asarray(jflex.simulate(true, ts, x0=jnp.asarray(x0), outputs=("beam.tip_deflection",), **kw_true)["beam.tip_deflection"])
     ym = y + rng.normal(size=y.shape) * float(c["noise_fraction_of_peak"]) * np.abs(y).max()
-    data = idf.TimeData(ts, {"beam.tip_deflection": ym}, x0=x0, simulate_kw=kw, name="tip")
+    # The fits integrate looser than the record (step error far below the 1 % noise).
+    data = idf.TimeData(ts, {"beam.tip_deflection": ym}, x0=x0, simulate_kw=dict(rtol=float(c["fit_rtol"]), atol=float(c["fit_atol"])), name="tip")
     spec = idf.ParameterSpec([idf.Free("EI", lambda m: m.effects[1].beam.EI, transform=idf.Log()),
                               idf.Free("k_e", lambda m: m.effects[1].damping.k_e, transform=idf.Log())])
-    res = idf.fit(mk(EI * 1.5, ke * 0.5), spec, data, max_steps=max_steps, progress=5)
-    z = {"EI": float((res.values["EI"] - EI) / res.std["EI"]), "k_e": float((res.values["k_e"] - ke) / res.std["k_e"])}
-    print(f"flexible link: EI = {float(res.values['EI']):.4f} (true {EI}), k_e = {float(res.values['k_e']):.3e} (true {ke}); errors {z} std")
+    rec = recover("flexible link", true, spec, data, start_factors(2, common["starts"], rng), common["tolerance_std"],
+                  idf.levenberg_marquardt(float(c["lm_tol"]), float(c["lm_tol"])), common["max_steps"])
+    res = rec.pop("last_fit")
     fig, a = plt.subplots(figsize=(9, 4))
     a.plot(ts, 1e3 * ym, "k.", ms=2, label="noisy record")
-    a.plot(ts, 1e3 * np.asarray(data.predict(res.model)["beam.tip_deflection"]), label="fit")
+    a.plot(ts, 1e3 * np.asarray(data.predict(res.model)["beam.tip_deflection"]), label=f"fit (from {rec['starts'][-1]['start_label']})")
     a.set(xlabel="t [s]", ylabel="tip deflection [mm]")
     a.legend()
     fig.tight_layout()
     fig.savefig(run_dir / "synthetic_flexible_link.png", dpi=120)
     plt.close(fig)
-    return {"fit": res.to_dict(), "error_in_std": z}
+    return rec
 
 
 def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     rng = np.random.default_rng(int(cfg.get("seed", 0)))
-    ms = int(cfg.get("max_steps", 60))
-    return {
-        "rigid_friction": rigid_friction(cfg["rigid_friction"], rng, run_dir),
-        "flexible_joints": flexible_joints(cfg["flexible_joints"], rng, ms),
-        "flexible_link": flexible_link(cfg["flexible_link"], rng, ms, run_dir),
+    common = {"max_steps": int(cfg.get("max_steps", 60)), "tolerance_std": float(cfg["tolerance_std"]),
+              "lm_tol": float(cfg.get("lm_tol", 1e-8)), "starts": cfg.get("starts", {})}
+    out = {
+        "rigid_friction": rigid_friction(cfg["rigid_friction"], rng, run_dir, common),
+        "flexible_joints": flexible_joints(cfg["flexible_joints"], rng, common),
+        "flexible_link": flexible_link(cfg["flexible_link"], rng, common, run_dir),
     }
+    oe = {"rigid_friction": out["rigid_friction"]["output_error"], "flexible_joints": out["flexible_joints"],
+          "flexible_link": out["flexible_link"]}
+    out["summary"] = {f"rigid_friction_{k}": {"within_tolerance": out["rigid_friction"][k]["within_tolerance"],
+                                               "max_abs_error_in_std": out["rigid_friction"][k]["max_abs_error_in_std"]} for k in ("ols", "wls")}
+    out["summary"] |= {k: {"all_recovered": v["all_recovered"], "starts": len(v["starts"]),
+                          "max_abs_error_in_std": max(max(abs(x) for x in r["error_in_std"]) for r in v["starts"]),
+                          "max_iterations": max(r["iterations"] for r in v["starts"])} for k, v in oe.items()}
+    print("summary:", out["summary"])
+    return out
 
 
 def main(argv=None):

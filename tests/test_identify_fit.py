@@ -270,3 +270,10 @@ def test_multistart_escapes_the_local_minimum_a_single_start_lands_in():
         idf.fit(model, spec, data, progress=False, multistart=idf.MultiStart(bounds={"freq": (1, 2)}))
     with pytest.raises(jflex.ParameterError, match="lower > 0"):
         idf.fit(model, spec, data, progress=False, multistart=idf.MultiStart(bounds={"amp": (0.0, 2.0)}))
+
+
+def test_levenberg_marquardt_trust_region_grows_at_a_good_ratio():
+    lm = idf.levenberg_marquardt(1e-6, 1e-6)
+    assert isinstance(lm, optx.LevenbergMarquardt) and float(lm.search.high_cutoff) == 0.75 and lm.rtol == 1e-6
+    with pytest.raises(jflex.ParameterError, match="expand_above must lie in \\(0, 1\\)"):
+        idf.levenberg_marquardt(expand_above=1.0)

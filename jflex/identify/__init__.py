@@ -35,6 +35,7 @@ from ._fit import (
     MultiStart as MultiStart,
     ParameterSpec as ParameterSpec,
     fit as fit,
+    levenberg_marquardt as levenberg_marquardt,
     residual_vector as residual_vector,
 )
 from ._residuals import (

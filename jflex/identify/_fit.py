@@ -287,6 +287,8 @@ class FitResult:
         lines.append("  singular values (d r / d u): " + np.array2string(self.singular_values, precision=3))
         for w in self.weak_directions:
             lines.append(f"  not identifiable: {w}")
+        for r in self.multistart:
+            lines.append(f"  multistart: candidate {r['candidate']}: cost {r['start_cost']:.4g} -> {r['cost']:.4g} in {r['steps']} steps ({r['result']})")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -343,6 +345,22 @@ def _gn_step(solver, u, state, args, tags):
     done, res = solver.terminate(_linear_model, u2, args, {}, state2, tags)
     # the residual at the accepted point u2 is the one the solver keeps (no new evaluation)
     return u2, state2, done, res, 0.5 * jnp.sum(state2.f_info.residual**2), state2.y_eval
+
+
+def levenberg_marquardt(rtol: float = 1e-8, atol: float = 1e-8, *, expand_above: float = 0.75, **kw) -> optx.LevenbergMarquardt:
+    """``optx.LevenbergMarquardt`` whose trust region grows (damping falls, x 1/3.5) whenever the
+    actual cost reduction is at least ``expand_above`` of the predicted one.
+
+    optimistix grows it only above 0.99 by default: once a few early steps of a strongly
+    nonlinear fit (a time record whose frequency is off, so the residual's phase is) have shrunk
+    it, steps on which the Gauss-Newton model is merely good (ratio 0.8-0.98) leave it small and
+    the fit creeps along in the steepest-descent regime (a tip free vibration started +/-50 % off:
+    over 60 iterations with the default, 23-31 with 0.75; the classical Moré choice).
+    ``kw``: passed to ``optx.LevenbergMarquardt`` (norm, linear_solver, verbose)."""
+    if not 0.0 < float(expand_above) < 1.0:
+        raise ParameterError(f"levenberg_marquardt: expand_above must lie in (0, 1), got {expand_above}")
+    lm = optx.LevenbergMarquardt(rtol=rtol, atol=atol, **kw)
+    return eqx.tree_at(lambda s: s.search, lm, optx.ClassicalTrustRegion(high_cutoff=float(expand_above)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -495,7 +513,8 @@ def fit(
     - ``spec``: :class:`ParameterSpec` (bound here to ``model``).
     - ``data``: one :class:`AbstractData` or a sequence (e.g. torque + modal + FRF): one weighted fit.
     - ``solver``: an optimistix least-squares solver (default ``LevenbergMarquardt(rtol=1e-8,
-      atol=1e-8)``) or minimiser (``optx.BFGS``; the cost is then ``0.5 |r|^2``). Jacobians are
+      atol=1e-8)``; for time records :func:`levenberg_marquardt` converges in far fewer
+      iterations from a distant start) or minimiser (``optx.BFGS``; the cost is then ``0.5 |r|^2``). Jacobians are
       exact (forward/reverse-mode AD), never finite differences.
     - ``max_steps`` (per local solve); ``progress``: print every step (or every ``progress``
       steps) to stderr; ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
