@@ -277,3 +277,24 @@ def test_levenberg_marquardt_trust_region_grows_at_a_good_ratio():
     assert isinstance(lm, optx.LevenbergMarquardt) and float(lm.search.high_cutoff) == 0.75 and lm.rtol == 1e-6
     with pytest.raises(jflex.ParameterError, match="expand_above must lie in \\(0, 1\\)"):
         idf.levenberg_marquardt(expand_above=1.0)
+
+
+class _RoughSineData(_SineData):
+    def residuals(self, m):
+        # a tiny rough term, as an adaptive ODE solve's error adds: no useful derivative
+        return {"y": super().residuals(m)["y"] + 1e-7 * jnp.sin(1e7 * m.omega + self.t)}
+
+
+def test_stall_ends_a_fit_that_the_cauchy_test_never_stops():
+    t = jnp.linspace(0, 10, 200)
+    data = _RoughSineData(t, jnp.sin(3.0 * t) + 0.05 * np.random.default_rng(0).normal(size=t.shape))
+    spec = idf.ParameterSpec([idf.Free("omega", lambda m: m.omega, transform=idf.Log()),
+                              idf.Free("amp", lambda m: m.amp, transform=idf.Log())])
+    model, lm = _Sine(jnp.asarray(2.8), jnp.asarray(1.5)), idf.levenberg_marquardt(1e-12, 1e-12)
+    full = idf.fit(model, spec, data, lm, progress=False, max_steps=60)
+    res = idf.fit(model, spec, data, lm, progress=False, max_steps=60, stall=5)
+    assert full.result == "max_steps reached" and res.result.startswith("stalled") and res.steps < 40
+    assert min(res.history[-5:]) >= res.history[-6] * (1 - 1e-10)
+    assert abs(res.values["omega"] - full.values["omega"]) < 1e-3 * full.std["omega"]
+    with pytest.raises(jflex.ParameterError, match="stall must be None or a number of steps >= 1"):
+        idf.fit(model, spec, data, progress=False, stall=0)

@@ -454,6 +454,10 @@ def _as_multistart(multistart):
     raise ParameterError(f"fit: multistart must be None, an int (number of candidates) or a MultiStart, got {multistart!r}")
 
 
+# A step counts as no decrease below this relative change of the best cost.
+_STALL_RTOL = 1e-10
+
+
 @dataclasses.dataclass
 class _Run:
     """One local solve: the best point seen and what is kept with it."""
@@ -467,26 +471,30 @@ class _Run:
     interrupted: bool
 
 
-def _loop(step, state, u0, cost0, keep0, max_steps, every, callback, spec, t_start, tag=""):
+def _loop(step, state, u0, cost0, keep0, max_steps, every, callback, spec, t_start, tag="", stall=None):
     """The step loop of every solver path: ``step(u, state) -> (u, state, done, result, cost,
     keep)``; ``keep`` (the Gauss-Newton path's residual and Jacobian at an accepted point, else
     ``None``) is stored with the best point. Ctrl-C ends it with the best point kept."""
     best = _Run(u0, cost0, keep0, [cost0], 0, "max_steps reached", False)
-    u = u0
+    u, flat = u0, 0
     try:
         for k in range(1, max_steps + 1):
             best.steps = k
             u, state, done, res, cost, keep = step(u, state)
             cost = float(cost)
             best.history.append(cost)
+            flat = 0 if np.isfinite(cost) and cost < best.cost * (1 - _STALL_RTOL) else flat + 1
             if np.isfinite(cost) and cost < best.cost:
                 best.u, best.cost, best.keep = u, cost, keep
+            if stall is not None and flat >= stall and not bool(done):
+                done, res = True, None
             if every and (k % every == 0 or bool(done)):
                 print(f"  fit{tag} step {k:4d}  cost {cost:.6e}  best {best.cost:.6e}  {time.perf_counter() - t_start:.1f} s", file=sys.stderr)
             if callback is not None:
                 callback(k, best.cost, spec.values(best.u))
             if bool(done):
-                best.message = "converged" if res == optx.RESULTS.successful else str(res)
+                best.message = (f"stalled (no cost decrease in {stall} steps)" if res is None
+                                else "converged" if res == optx.RESULTS.successful else str(res))
                 break
     except KeyboardInterrupt:
         best.interrupted, best.message = True, "interrupted"
@@ -504,6 +512,7 @@ def fit(
     callback: Callable | None = None,
     weak_tol: float = 1e-6,
     multistart: "MultiStart | int | None" = None,
+    stall: int | None = None,
 ) -> FitResult:
     """Fit the free parameters ``spec`` of ``model`` to ``data`` with an optimistix solver.
 
@@ -522,6 +531,11 @@ def fit(
       or an int ``n`` (``MultiStart(n)``): sampled starts ranked by cost in one vmapped
       evaluation, local solves from the best few, the lowest final cost returned. For costs with
       local minima (e.g. an amplitude-dependent frequency in a time record).
+    - ``stall``: ``None`` (default) or a number of steps: stop a local solve (result
+      ``"stalled ..."``) once that many consecutive steps have not lowered the cost. At the
+      minimum of a residual from an adaptive ODE solve, whose error makes it rough at the solve's
+      tolerance, the solver keeps rejecting steps and its Cauchy test (on an accepted step) may
+      not fire before ``max_steps``.
 
     Gauss-Newton-type solvers (Levenberg-Marquardt, Gauss-Newton, Dogleg) get the residual and
     its Jacobian from ONE compiled function of the parameters (``jax.jacfwd``: the p tangents
@@ -540,6 +554,8 @@ def fit(
     spec = spec.bind(pair)
     solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
     ms = _as_multistart(multistart)
+    if stall is not None and int(stall) < 1:
+        raise ParameterError(f"fit: stall must be None or a number of steps >= 1, got {stall}")
     u0 = spec.pack(pair)
 
     def resid_parts(u):
@@ -639,7 +655,8 @@ def fit(
         cost0, keep0, state = start(us)
         if not np.isfinite(cost0):
             raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
-        run = _loop(step, state, us, cost0, keep0, max_steps, every, callback, spec, t_start, f" [start {i}]" if ms is not None else "")
+        run = _loop(step, state, us, cost0, keep0, max_steps, every, callback, spec, t_start, f" [start {i}]" if ms is not None else "",
+                    None if stall is None else int(stall))
         if ms_report:
             ms_report[i].update(cost=run.cost, steps=run.steps, result=run.message,
                                 values={k: np.asarray(v).tolist() for k, v in spec.values(run.u).items()})
