@@ -180,5 +180,9 @@ def run(cfg: dict, out: pathlib.Path) -> dict:
     return res
 
 
+def main(argv=None):
+    return jflex.experiment_cli(NAME, DEFAULT, run, sys.argv[1:] if argv is None else argv, description=__doc__)
+
+
 if __name__ == "__main__":
-    jflex.experiment_cli(NAME, DEFAULT, run, sys.argv[1:], description=__doc__)
+    main()

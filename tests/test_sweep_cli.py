@@ -76,3 +76,15 @@ def test_cli_reports_bad_robot_cleanly(capsys):
 
     assert main(["info", "no_such_robot"]) == 2
     assert "unknown robot 'no_such_robot'" in capsys.readouterr().err
+
+
+def test_every_experiment_runs_under_jflex_run():
+    # `jflex run NAME` calls main(argv) of experiments/NAME.py
+    import ast
+
+    import pathlib
+
+    root = pathlib.Path(ROOT) / "experiments"
+    for path in sorted(root.glob("*.py")):
+        tree = ast.parse(path.read_text())
+        assert any(isinstance(n, ast.FunctionDef) and n.name == "main" for n in tree.body), f"{path.name}: no main(argv)"
