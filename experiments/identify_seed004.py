@@ -35,10 +35,10 @@ Outcome (last run, 300 samples over 3 s, 1 % noise, NRMSE noise floor 0.040):
   0.185). From Table V's start it is reached in 11 iterations; a 16-candidate multistart over
   k_e in [1e-3, 0.3], alpha in (0, 1) ends at the same point from both of its local fits (27
   and 19 iterations, 139 s in all), so it is the global minimum. Singular values of dr/du
-  (log k_e, logit alpha): 0.56 and 0.093, correlation -0.84: the record does determine alpha (the law's stiffness part k_e w^a cos(pi a / 2) shifts the
-  frequency, its loss part k_e w^a sin(pi a / 2) sets the decay), but the law cannot reproduce
-  a Masing element's amplitude-dependent frequency and nearly linear decay (NRMSE 20 times the
-  noise floor): alpha = 0.87 is what a misspecified law makes of this record, not an estimate
+  (log k_e, logit alpha): 0.56 and 0.093, correlation -0.84: the record does determine alpha
+  (the law's stiffness part k_e w^a cos(pi a / 2) shifts the frequency, its loss part
+  k_e w^a sin(pi a / 2) sets the decay), but the law cannot reproduce a Masing element's
+  amplitude-dependent frequency and nearly linear decay (NRMSE 20 times the noise floor): alpha = 0.87 is what a misspecified law makes of this record, not an estimate
   to set beside Table V's value from the real arm.
 - hysteretic, single start (+50 % h0, -50 % delta): local minimum h0 = 0.235 (+24 %),
   delta = 2.5e-4 m (-49 %), NRMSE 0.33, errors of 24 and 48 std; 32 iterations, 218 s.
