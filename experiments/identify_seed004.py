@@ -38,8 +38,9 @@ Outcome (last run, 300 samples over 3 s, 1 % noise, NRMSE noise floor 0.040):
   (log k_e, logit alpha): 0.56 and 0.093, correlation -0.84: the record does determine alpha
   (the law's stiffness part k_e w^a cos(pi a / 2) shifts the frequency, its loss part
   k_e w^a sin(pi a / 2) sets the decay), but the law cannot reproduce a Masing element's
-  amplitude-dependent frequency and nearly linear decay (NRMSE 20 times the noise floor): alpha = 0.87 is what a misspecified law makes of this record, not an estimate
-  to set beside Table V's value from the real arm.
+  amplitude-dependent frequency and nearly linear decay (NRMSE 20 times the noise floor):
+  alpha = 0.87 is what a misspecified law makes of this record, not an estimate to set beside
+  Table V's value from the real arm.
 - hysteretic, single start (+50 % h0, -50 % delta): local minimum h0 = 0.235 (+24 %),
   delta = 2.5e-4 m (-49 %), NRMSE 0.33, errors of 24 and 48 std; 32 iterations, 218 s.
 - hysteretic, multistart (24 Latin-hypercube candidates in h0 [0.05, 0.5] N, delta [1e-4, 2e-3]
