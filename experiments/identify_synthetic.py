@@ -24,7 +24,8 @@ rigid + friction: OLS / WLS of 24 base parameters within 2.2 / 2.3 std; output e
 m3 c3x, m3 c3y) from 5 starts, all converged to the same point in 17-19 iterations (1-3 s), max
 error 2.0 std (1.8 %, Fc of joint 2). Flexible joints (K, C) from 6 starts: 14-29 iterations
 (1.4-2.8 s), max error 0.71 std (0.2 %). Flexible link (EI, k_e) from all 4 sign patterns:
-18-41 iterations (45-116 s), EI +0.002 %, k_e -0.67 % (0.25 std). Every parameter within 4 std.
+18-41 iterations (45-160 s on a shared 2-core machine), EI +0.002 %, k_e -0.67 % (0.25 std).
+Every parameter within 4 std.
 
     python experiments/identify_synthetic.py [CONFIG] [--out DIR]
 """
