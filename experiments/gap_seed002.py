@@ -19,13 +19,6 @@ plots into the run folder. See docs/press.md.
 
 from __future__ import annotations
 
-import os
-
-# equinox's runtime checks compile a host callback into every jitted FEM call; on a shared CPU
-# that repeatedly stalled XLA's runtime mid-compile. NaN-on-error has none (read at import, so
-# this only acts when the script is run directly, not under an already started `jflex run`).
-os.environ.setdefault("EQX_ON_ERROR", "nan")
-
 import pathlib
 import sys
 import time

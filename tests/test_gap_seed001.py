@@ -63,7 +63,7 @@ def test_config_errors_name_the_field():
         G.check_config(bad)
 
 
-@pytest.mark.slow
+@pytest.mark.heavy  # four compiled simulations, ~4 min on 2 shared cores; JFLEX_SLOW=1 runs it
 def test_ladder_selects_the_flexible_joint_and_recovers_its_stiffness():
     cfg = _small_cfg()
     recs, _, _ = G.make_records(cfg)

@@ -1,11 +1,5 @@
 """Gap diagnosis on seed 002's press (experiments/gap_seed002.py) at a small size."""
 
-import os
-
-# equinox's runtime checks compile a host callback into every jitted FEM call; on the shared CPU
-# test machine that repeatedly stalled XLA's runtime mid-compile. NaN-on-error has no callback.
-os.environ.setdefault("EQX_ON_ERROR", "nan")
-
 import copy
 import importlib.util
 import json
