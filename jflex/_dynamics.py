@@ -275,12 +275,12 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
     return s.stack(qdd, _dtype())
 
 
-def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "crba"):
+def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
     """Joint accelerations (n,) from torques: ``qdd = M^-1 (tau - h)``.
 
-    ``method="crba"`` (default: mass matrix and Cholesky solve, the faster of the two for the
-    7-joint Panda in ``benchmarks/bench_dynamics.py``, batches 1e3 and 1e5) or ``"aba"``
-    (articulated-body algorithm, O(n), better for long chains).
+    ``method="aba"`` (default: the articulated-body algorithm, O(n); for the 7-joint Panda in
+    ``benchmarks/bench_dynamics.py`` it was faster than the alternative in 5 of 6 batched
+    comparisons, batches 1e3 and 1e5) or ``"crba"`` (mass matrix and Cholesky solve).
     """
     if method == "aba":
         return aba(robot, q, qd, tau, f_ext)
