@@ -255,25 +255,32 @@ def test_frf_noise_floor_of_averaged_repeats(tmp_path):
     assert all(0.4 < v < 0.8 for v in fl.values()), fl
 
 
-def test_frf_fractional_damping_beats_its_rivals(tmp_path):
-    # a fractional law planted at one joint: refitted at that joint it closes most of the excess
-    # gap, more than the same law elsewhere or a hysteretic law there (the three closest rivals
-    # of the bench case; the full diagnosis is the slow test below)
-    from jflex.gap._diagnose import Candidate, Problem, _combine, noise_floor
+def _candidate_shrinks(folder, cands) -> dict:
+    """Percentage of the nominal excess gap each candidate closes, refitted alone on the nominal."""
+    from jflex.gap._diagnose import Problem, _combine, noise_floor
 
-    folder = G.frf_case(tmp_path / "fd", "arm3", ["fractional_damping"], seed=504)
-    truth = _truth(folder)["effects"][0]
     case = load_case(folder)
     pb = Problem(case)
     nom = pb.nominal_state()
     ev0 = pb.evaluate(nom)
     floor = noise_floor(pb, ev0, case)
-    j = pb.names.index(truth["joint"])
-    other = (j + 2) % 3
     exc0 = _combine(ev0, floor)[2]
-    shrink = {}
-    for c in (Candidate("fractional_damping", j), Candidate("fractional_damping", other), Candidate("hysteretic_damping", j)):
-        shrink[c] = 100 * (1 - _combine(pb.evaluate(pb.add(nom, c)), floor)[2] / exc0)
+    return {c: 100 * (1 - _combine(pb.evaluate(pb.add(nom, c)), floor)[2] / exc0) for c in cands}
+
+
+def test_frf_fractional_damping_beats_its_rivals(tmp_path):
+    # a fractional law planted at one joint: refitted at that joint it closes most of the excess
+    # gap, more than the same law elsewhere or a hysteretic law there (the three closest rivals
+    # of the bench case; the full diagnosis is the slow test below)
+    from jflex.gap._diagnose import Candidate
+
+    folder = G.frf_case(tmp_path / "fd", "arm3", ["fractional_damping"], seed=504)
+    truth = _truth(folder)["effects"][0]
+    names = load_case(folder).robot.joint_names
+    j = names.index(truth["joint"])
+    other = (j + 2) % 3
+    shrink = _candidate_shrinks(folder, [Candidate("fractional_damping", j), Candidate("fractional_damping", other),
+                                         Candidate("hysteretic_damping", j)])
     best = max(shrink, key=shrink.get)
     assert best == Candidate("fractional_damping", j), shrink
     assert shrink[best] > 50, shrink
@@ -286,7 +293,7 @@ def test_frf_link_flexibility_found(tmp_path):
     # Seeds that bend link2 (link1 of arm3 is 0.15 m long: its bending is the tilt of joint2,
     # a known confounded pair)
     # (small version: the truth and its closest rivals refitted, not the whole diagnosis)
-    from jflex.gap._diagnose import Candidate, Problem, _combine, noise_floor
+    from jflex.gap._diagnose import Candidate
 
     folder = G.frf_case(tmp_path / "lf", "arm3", ["link_flexibility"], seed=502 if SLOW else 22)
     truth = _truth(folder)["effects"][0]
@@ -295,17 +302,9 @@ def test_frf_link_flexibility_found(tmp_path):
         assert (r["selected"][0]["effect"], r["selected"][0]["link"]) == ("link_flexibility", truth["link"])
         assert r["shrink"] > 60
         return
-    case = load_case(folder)
-    pb = Problem(case)
-    nom = pb.nominal_state()
-    ev0 = pb.evaluate(nom)
-    floor = noise_floor(pb, ev0, case)
-    exc0 = _combine(ev0, floor)[2]
-    i = list(pb.robot.link_names).index(truth["link"])
-    shrink = {}
-    for c in (Candidate("link_flexibility", i), Candidate("orthogonal_compliance", i), Candidate("orthogonal_compliance", i + 1),
-              Candidate("payload")):
-        shrink[c] = 100 * (1 - _combine(pb.evaluate(pb.add(nom, c)), floor)[2] / exc0)
+    i = list(load_case(folder).robot.link_names).index(truth["link"])
+    shrink = _candidate_shrinks(folder, [Candidate("link_flexibility", i), Candidate("orthogonal_compliance", i),
+                                         Candidate("orthogonal_compliance", i + 1), Candidate("payload")])
     best = max(shrink, key=shrink.get)
     assert best == Candidate("link_flexibility", i), shrink
     assert shrink[best] > 60, shrink
