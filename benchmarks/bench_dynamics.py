@@ -65,7 +65,7 @@ def bench_jflex(robot, q, qd, qdd, tau):
         "fd (crba+chol)": lambda a, b, c, d: jflex.forward_dynamics(robot, a, b, d, method="crba"),
         "dtau/dq": lambda a, b, c, d: jax.jacfwd(lambda x: jflex.rnea(robot, x, b, c))(a),
     }
-    out, compile_s = {}, {}
+    out, compile_s, first = {}, {}, {}
     N = q.shape[0]
     for name, f in fns.items():
         # batches go through jflex.batched (cache-sized blocks, fusion off for these kernels);
@@ -75,7 +75,31 @@ def bench_jflex(robot, q, qd, qdd, tau):
         jax.block_until_ready(jf(q, qd, qdd, tau))
         compile_s[name] = time.perf_counter() - t0
         out[name] = best_time(lambda: jax.block_until_ready(jf(q, qd, qdd, tau)))
-    return out, compile_s
+        first[name] = np.asarray(jf(q, qd, qdd, tau))[:CHECK]
+    return out, compile_s, first
+
+
+CHECK = 64  # states whose results are checked against Pinocchio's
+
+
+def check_against_pinocchio(model, first, q, qd, qdd, tau):
+    """Max relative difference of jflex's timed results from Pinocchio's on the first states: a
+    timing of a wrong program is no timing (an XLA miscompile once made batched RNEA O(1) wrong)."""
+    import pinocchio as pin
+
+    data = model.createData()
+    n = min(CHECK, q.shape[0])
+    ref = {
+        "rnea": [pin.rnea(model, data, q[i], qd[i], qdd[i]).copy() for i in range(n)],
+        "crba": [np.triu(pin.crba(model, data, q[i])) + np.triu(pin.crba(model, data, q[i]), 1).T for i in range(n)],
+        "fd (aba)": [pin.aba(model, data, q[i], qd[i], tau[i]).copy() for i in range(n)],
+        "fd (crba+chol)": [pin.aba(model, data, q[i], qd[i], tau[i]).copy() for i in range(n)],
+    }
+    out = {}
+    for name, R in ref.items():
+        R = np.array(R)
+        out[name] = float(np.max(np.abs(first[name][:n] - R)) / np.max(np.abs(R)))
+    return out
 
 
 def bench_pinocchio(model, q, qd, qdd, tau):
@@ -212,7 +236,12 @@ def main(argv=None):
         q = rng.uniform(-1.5, 1.5, (N, robot.nq))
         qd, qdd = rng.normal(size=(2, N, robot.nq))
         tau = jax.jit(jax.vmap(lambda a, b, c: jflex.rnea(robot, a, b, c)))(q, qd, qdd)
-        jt, jc = bench_jflex(robot, q, qd, qdd, np.asarray(tau))
+        jt, jc, first = bench_jflex(robot, q, qd, qdd, np.asarray(tau))
+        diffs = check_against_pinocchio(model, first, q, qd, qdd, np.asarray(tau))
+        bad = {k: v for k, v in diffs.items() if not v < 1e-9}
+        print(f"  batch {N}: max relative difference from Pinocchio " + ", ".join(f"{k} {v:.1e}" for k, v in diffs.items()))
+        if bad:
+            raise SystemExit(f"jflex results differ from Pinocchio's at batch {N}: {bad}; timings would be meaningless")
         pt = bench_pinocchio(model, q, qd, qdd, np.asarray(tau)) if N <= args.pin_max else {}
         mj = bench_mjx(path, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
         bench_jaxsim(path, robot.joint_names, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
@@ -223,6 +252,7 @@ def main(argv=None):
                 "algorithm": name,
                 "jflex_us": 1e6 * jt[name] / N,
                 "jflex_compile_s": jc[name],
+                "max_rel_diff_vs_pinocchio": diffs.get(name),
                 "pinocchio_loop_us": 1e6 * pt[name] / N if name in pt else None,
                 "mjx_us": 1e6 * mj[0][name] / N if mj and name in mj[0] else None,
             }
