@@ -51,9 +51,10 @@ def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True):
     in cache however large the batch.
 
     ``fuse=False`` compiles one vmapped program without XLA's fusion pass (CPU only; no blocks),
-    which is fastest for the long elementwise rigid-body kernels (``rnea``, ``crba``, ``aba``,
-    ``regressor``); keep the default ``True`` for anything else. Measured in
-    ``benchmarks/bench_dynamics.py``.
+    which is fastest for the long elementwise rigid-body kernels ``rnea``, ``crba`` and ``aba``
+    (measured in ``benchmarks/bench_dynamics.py``, checked against Pinocchio in the tests). Keep
+    the default ``True`` for anything else: on jax 0.10.2, XLA:CPU without fusion also returned
+    wrong results for other programs (lax.map blocks; a modal linearisation's mass matrix).
 
     Like :func:`sweep`, it calls :func:`jflex.tune_allocator` (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
     """
