@@ -168,13 +168,19 @@ def test_response_null_case_is_within_its_propagated_noise_floor(tmp_path):
     assert 1.0 < d.arrays["cutoff_hz"] < 20.0
 
 
-def test_response_without_every_joint_channel_is_reported_unused(tmp_path):
+def test_response_without_every_joint_channel_is_output_error(tmp_path):
+    # a channel set lacking some joint is compared as output error: it needs the rest posture q0
+    # (the diagnosis itself is in tests/test_gap_response.py)
     folder = G.torque_case(tmp_path / "rtip", "planar2", [], seed=3, n_train=1, angle_noise=1e-4)
     z = dict(np.load(folder / "resp1.npz"))
     z["y"], z["channels"] = z["y"][:, :1], np.array(["tip_x"])
     np.savez(folder / "resp1.npz", **z)
+    with pytest.raises(jflex.DataError, match=r"resp1\.npz: field 'q0': missing"):
+        load_case(folder)
+    z["q0"] = np.array([0.1, -0.2])
+    np.savez(folder / "resp1.npz", **z)
     d = next(d for d in load_case(folder).datasets if d.kind == "response")
-    assert "q" not in d.arrays
+    assert "q" not in d.arrays and np.allclose(d.arrays["q0"], [0.1, -0.2])
     z["t"] = z["t"] * (1 + 0.05 * np.linspace(0, 1, len(z["t"])) ** 2)  # non-uniform sampling
     z["y"], z["channels"] = np.zeros((len(z["t"]), 2)), np.array(["shoulder", "elbow"])
     np.savez(folder / "resp1.npz", **z)

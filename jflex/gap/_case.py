@@ -216,6 +216,7 @@ def _modal(arrs, path, robot):
     return out, names
 
 
+TIP_CHANNELS = ("tip_x", "tip_y", "tip_z")  # [m] origin of the case's tool_frame in base axes
 RESPONSE_NOISE_DRAWS = 4  # noise realisations propagated into the equation error (noise floor)
 RESPONSE_CUTOFF_FACTOR = 2.0
 RESPONSE_SG_ORDER = 5
@@ -240,9 +241,33 @@ def _response(arrs, path, robot):
     if tau.shape[1] != n:
         raise DataError(f"{path}: field 'tau': expected {n} columns (applied torques at the model joints "
                         f"{list(robot.joint_names)}), got {tau.shape[1]}")
+    known = tuple(robot.joint_names) + TIP_CHANNELS
+    bad = [c for c in ch if c not in known]
+    if bad:
+        raise DataError(f"{path}: field 'channels': unknown channels {bad}; a channel is a model joint "
+                        f"{list(robot.joint_names)} [rad] or one of {list(TIP_CHANNELS)} [m] (the case's tool_frame)")
     out = {"t": t, "tau": tau, "y": y, "channels": ch}
     if all(j in ch for j in robot.joint_names):
         out.update(_response_motion(t, tau, y, ch, path, robot))
+        return out, ()
+    # output error: the model is simulated under tau from rest at q0 and its channels compared
+    if t.size < 20:
+        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
+    if np.any(np.diff(t) <= 0):
+        raise DataError(f"{path}: field 't': time must be strictly increasing")
+    if "q0" not in arrs:
+        raise DataError(f"{path}: field 'q0': missing (a response whose channels do not name every model joint "
+                        f"{list(robot.joint_names)} is simulated from rest at q0 ({n},) [rad])")
+    q0 = _num(arrs["q0"], path, "q0")
+    if q0.shape != (n,):
+        raise DataError(f"{path}: field 'q0': expected shape ({n},) (the rest posture at t[0], model joints "
+                        f"{list(robot.joint_names)} in that order) [rad], got shape {q0.shape}")
+    out["q0"] = q0
+    if "y_repeats" in arrs:
+        r = _num(arrs["y_repeats"], path, "y_repeats", ndim=3)
+        if r.shape[1:] != y.shape:
+            raise DataError(f"{path}: field 'y_repeats': expected (R, {y.shape[0]}, {y.shape[1]}) (repeats of y), got {r.shape}")
+        out["y_repeats"] = r
     return out, ()
 
 
@@ -397,6 +422,9 @@ def load_case(path) -> Case:
         fpath = base / str(d["file"])
         arrs = _load_npz(fpath, f"{fld}.file", file)
         data, extra = _LOADERS[d["kind"]](arrs, fpath, robot)
+        if d["kind"] == "response" and tool is None and any(c in TIP_CHANNELS for c in data["channels"]):
+            raise _err(file, "tool_frame", f"needed by the response data set {fld} ({fpath.name}): its tip channels "
+                       "are positions of the tool frame")
         datasets.append(Dataset(d["kind"], fpath, d["split"], str(d.get("name", fpath.stem)), data, extra))
     names = [d.name for d in datasets]
     if len(set(names)) != len(names):

@@ -4,7 +4,9 @@ shrinks once that effect is added and refitted, judged on held-out validation da
 The gap of a validation data set is its NRMSE [%]: torques ``rms(tau_model - tau) / std(tau)``
 per joint; FRFs ``sqrt(sum |H_model - H|^2 / sum |H|^2)`` per entry; modal tables the RMS
 relative frequency error (unmatched measured modes included through their nearest model mode)
-plus ``0.1 x`` the relative damping error. The noise floor is the NRMSE that measurement noise
+plus ``0.1 x`` the relative damping error; output-error responses (channels lacking some joint,
+e.g. tip coordinates, simulated under their applied torques from rest at ``q0``, :mod:`._response`)
+``rms(y_model - y) / scale`` per channel. The noise floor is the NRMSE that measurement noise
 alone would leave (from repeated records, else from the residual's high-frequency content), and
 the *excess* gap ``sqrt(max(nrmse^2 - floor^2, 0))`` is what a model can close: ``shrink`` is
 the percentage of the excess closed.
@@ -19,6 +21,7 @@ import numpy as np
 
 from ._case import Case, load_case
 from . import _linear as L
+from . import _response as R
 from . import _torque as T
 
 TORQUE_EFFECTS = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
@@ -61,6 +64,10 @@ def _is_torque(d) -> bool:
     return d.kind == "torque" or (d.kind == "response" and "q" in d.arrays)
 
 
+def _is_output_error(d) -> bool:
+    return d.kind == "response" and "q" not in d.arrays
+
+
 # ---------------------------------------------------------------------------------------------
 class Problem:
     """Precomputed data of a case for repeated refits."""
@@ -75,7 +82,10 @@ class Problem:
         self.tval = [T.torque_set(self.robot, d) for d in case.split("validation") if _is_torque(d)]
         self.ftrain = [d for d in case.datasets if d.split == "train" and d.kind in ("frf", "modal")]
         self.fval = [d for d in case.datasets if d.split == "validation" and d.kind in ("frf", "modal")]
-        self.responses = [d for d in case.datasets if d.kind == "response" and not _is_torque(d)]
+        # the others are simulated under their applied torques and compared as output error, on
+        # validation only: a refit through the simulation would cost one nonlinear fit per candidate
+        self.rval = [R.response_set(self.robot, d, case.tool_frame) for d in case.split("validation") if _is_output_error(d)]
+        self.responses = [d for d in case.split("train") if _is_output_error(d)]
         self.nominal = {(e["effect"], self.names.index(j)) for e in case.nominal_effects for j in e["joints"]}
         self.nominal_effects = case.nominal_effects
 
@@ -327,6 +337,14 @@ class Problem:
         tsets = self.tval if sets == "validation" else self.ttrain
         fsets = self.fval if sets == "validation" else self.ftrain
         out = {}
+        if sets == "validation" and self.rval:
+            model = R.simulation_model(self.robot, state.tfit)
+            for s in self.rval:
+                e, ok = R.residual(model, s)
+                ch = np.sqrt(np.mean(e**2, axis=0)) * 100
+                out[s.name] = dict(kind="response", nrmse=float(np.sqrt(np.mean(e**2)) * 100),
+                                   channels={c: float(v) for c, v in zip(s.channels, ch)}, neff=e.size / 10.0,
+                                   resid=e, solved=ok)
         for s in tsets:
             pred = T.predict(state.tfit, s)
             e = (pred - s.tau) / s.scale
@@ -396,6 +414,17 @@ def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
             if "tau_repeats" in d.arrays:
                 rep = d.arrays["tau_repeats"]
                 sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale / _mean_of(rep, d.arrays["tau"])
+            else:
+                e = r["resid"]
+                d2 = e[2:] - 2 * e[1:-1] + e[:-2]
+                sig = np.array([_mad_sigma(d2[:, j]) / np.sqrt(6) for j in range(e.shape[1])])
+            out[name] = float(np.sqrt(np.mean(sig**2)) * 100)
+        elif r["kind"] == "response":
+            # output error: white measurement noise on y, the same estimates on the residual
+            s = next(s for s in problem.rval if s.name == name)
+            if "y_repeats" in d.arrays:
+                rep = d.arrays["y_repeats"]
+                sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale / _mean_of(rep, d.arrays["y"])
             else:
                 e = r["resid"]
                 d2 = e[2:] - 2 * e[1:-1] + e[:-2]
@@ -537,13 +566,14 @@ def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 
                 item["band_hz"] = [f, f]
                 item["unmatched"] = bool(abs(r["ef"][k]) > 0.1)
             out.append(item)
-        if r["kind"] == "torque":
-            s = next(s for s in problem.tval if s.name == name)
+        if r["kind"] in ("torque", "response"):
+            s = next(s for s in problem.tval + problem.rval if s.name == name)
+            chans = problem.names if r["kind"] == "torque" else s.channels
             e = r["resid"]
             edges = np.linspace(0, len(s.t), n_windows + 1).astype(int)
-            for j in range(problem.n):
+            for j, cn in enumerate(chans):
                 for a, b in zip(edges[:-1], edges[1:]):
-                    out.append(dict(dataset=name, channel=problem.names[j], window_s=[float(s.t[a]), float(s.t[b - 1])],
+                    out.append(dict(dataset=name, channel=cn, window_s=[float(s.t[a]), float(s.t[b - 1])],
                                     nrmse=float(np.sqrt(np.mean(e[a:b, j] ** 2)) * 100), floor=floor[name]))
                 # residual spectrum: the band holding most of the residual's energy
                 fs = 1.0 / np.mean(np.diff(s.t))
@@ -552,8 +582,8 @@ def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 
                 bands = np.geomspace(max(fr[1], 1e-3), fr[-1], n_bands + 1)
                 for lo, hi in zip(bands[:-1], bands[1:]):
                     m = (fr >= lo) & (fr < hi)
-                    val = float(np.sqrt(spec[m].sum() / spec.sum()) * r["channels"][problem.names[j]]) if m.any() else 0.0
-                    out.append(dict(dataset=name, channel=problem.names[j], band_hz=[float(lo), float(hi)], nrmse=val,
+                    val = float(np.sqrt(spec[m].sum() / max(spec.sum(), 1e-300)) * r["channels"][cn]) if m.any() else 0.0
+                    out.append(dict(dataset=name, channel=cn, band_hz=[float(lo), float(hi)], nrmse=val,
                                     floor=floor[name]))
         if r["kind"] == "frf":
             a = d.arrays
@@ -761,6 +791,7 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
         parameters=_parameters(pb, state), nominal_parameters=_parameters(pb, nom),
         unmatched_modes=[w for w in wh if w.get("unmatched")],
+        responses_output_error=[s.name for s in pb.rval],
         responses_not_modelled=[d.name for d in pb.responses],
         seconds=time.perf_counter() - t0,
         units={"gap": "NRMSE %", "noise_floor": "NRMSE %", "shrink": "% of the excess over noise closed"},

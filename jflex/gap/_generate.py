@@ -240,12 +240,38 @@ TORQUE_PARAM_DRAW = {
 JOINTLESS = ("payload", "sensor_delay")
 
 
+def rest_trajectory(n, rng, q0, T=1.5, fs=200.0, f0=0.6, harmonics=3, amp=0.3):
+    """A motion that starts at rest at ``q0``: ``q0 + sum_k c_k (1 - cos(w_k t))`` per joint, exact
+    derivatives: (t, q, qd, qdd)."""
+    t = np.arange(int(T * fs)) / fs
+    q, qd, qdd = (np.tile(np.asarray(q0, float), (t.size, 1)) * c for c in (1.0, 0.0, 0.0))
+    for j in range(n):
+        c = rng.normal(size=harmonics) / np.arange(1, harmonics + 1)
+        c *= amp / np.sum(np.abs(c))
+        for k in range(harmonics):
+            w = 2 * np.pi * f0 * (k + 1)
+            q[:, j] += c[k] * (1 - np.cos(w * t))
+            qd[:, j] += c[k] * w * np.sin(w * t)
+            qdd[:, j] += c[k] * w * w * np.cos(w * t)
+    return t, q, qd, qdd
+
+
+def tool_positions(robot, q, frame="tool"):
+    """Origin (N, 3) [m] of ``frame`` in base axes along the motion ``q`` (N, n)."""
+    from .._dynamics import frame_placement
+
+    return np.asarray(jax.jit(jax.vmap(lambda a: frame_placement(robot, a, frame)[:3, 3]))(jnp.asarray(q)))
+
+
 def torque_case(folder, robot_name, truths, seed, noise=0.01, nominal_friction=False, n_train=2, n_val=1,
-                angle_noise=None):
+                angle_noise=None, tip_noise=None):
     """A torque case: ``truths`` list of effect names (joint chosen at random where it applies).
 
     ``angle_noise`` [rad]: write the validation sets as ``response`` data instead, the applied
-    torques exact and the joint angles measured with that white noise.
+    torques exact and the joint angles measured with that white noise. ``tip_noise`` [m]: write
+    them as tip-only ``response`` data (``tip_x``, ``tip_y``, ``tip_z`` of the tool frame, with
+    that white noise) of short motions from rest at a posture ``q0`` (:func:`rest_trajectory`),
+    the applied torques being the truth's inverse dynamics along the motion.
     """
     rng = np.random.default_rng(seed)
     folder = pathlib.Path(folder)
@@ -289,6 +315,14 @@ def torque_case(folder, robot_name, truths, seed, noise=0.01, nominal_friction=F
     for i in range(n_train + n_val):
         tt, q, qd, qdd = fourier_trajectory(n, rng)
         split = "train" if i < n_train else "validation"
+        if split == "validation" and tip_noise is not None:
+            q0 = rng.uniform(-0.6, 0.6, n)
+            tt, q, qd, qdd = rest_trajectory(n, rng, q0)
+            tau = torque_data(robot, drawn, tt, q, qd, qdd, rng, 0.0, fric)
+            y = tool_positions(robot, q) + tip_noise * rng.standard_normal((tt.size, 3))
+            dsets.append(("response", f"tip{i}", split, dict(t=tt, tau=tau, y=y, channels=np.array(["tip_x", "tip_y", "tip_z"]),
+                                                             q0=q0)))
+            continue
         if split == "validation" and angle_noise is not None:
             tau = torque_data(robot, drawn, tt, q, qd, qdd, rng, 0.0, fric)
             y = q + angle_noise * rng.standard_normal(q.shape)

@@ -161,9 +161,14 @@ def markdown(r: dict, plots) -> str:
     for s in r["steps"]:
         L.append(f"| {s['added'] or 'nominal'} | {s['gap']:.2f} | {s['excess']:.2f} |")
     L += ["", "## Fitted parameters of the final model", "", "```", _params(r["parameters"]), "```", ""]
+    if r.get("responses_output_error"):
+        L.append(f"Response data sets {r['responses_output_error']} were compared as output error: the model simulated "
+                 "under their applied torques from rest at their q0 (torque-side terms only; sensor delay, backlash "
+                 "and FRF-fitted springs are not simulated).")
     if r["responses_not_modelled"]:
         L.append(f"Response data sets {r['responses_not_modelled']} were validated but not used: they lack a channel for "
-                 "some model joint, and tip channels alone are not yet part of the diagnosis.")
+                 "some model joint and lie in the train split, where output error is not fitted (it is scored on "
+                 "validation sets only).")
     L += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
     L.append(f"\n_Diagnosis took {r['seconds']:.1f} s._")
     return "\n".join(L) + "\n"

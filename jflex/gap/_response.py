@@ -1,0 +1,155 @@
+"""Output-error response sets of the gap diagnosis: records whose channels do not hold every
+model joint (tip coordinates, a few joint angles) are compared with the model simulated under
+the recorded applied torques from rest at the recorded posture ``q0``.
+
+The simulated model is the rigid robot plus the torque-side terms fitted on the torque training
+sets (:mod:`._torque`), written as one effect of fixed structure (:class:`FittedTorques`): every
+candidate and every step of the forward selection then reuses one compiled solve. Terms that act
+on what a torque sensor or a motor encoder reads rather than on the motion (``sensor_delay``,
+``backlash``) and the spring structure fitted on FRF/modal data are left out of the simulation;
+see ``docs/case_format.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._model import Model
+from .._simulate import simulate
+from ..effects._base import AbstractEffect, Slots
+from .._inputs import Sampled
+from . import _torque as T
+
+TIP_CHANNELS = {"tip_x": 0, "tip_y": 1, "tip_z": 2}  # [m] origin of the case's tool_frame, base axes
+NOT_SIMULATED = ("sensor_delay", "backlash")  # act on the measurement, not on the motion
+RTOL, ATOL = 1e-7, 1e-9  # the records' noise is ~1e-4 of their spread: the solver error stays far below
+MAX_STEPS = 200_000
+FAILED_ERROR = 10.0  # normalised error (1000 %) of samples a failed or diverged solve left non-finite
+
+
+class FittedTorques(AbstractEffect):
+    """The torque-side terms of a :class:`._torque.TorqueFit` as one effect on the robot joints:
+
+    $$ f = -\\big[F_v \\dot q + (F_c + F_{s} e^{-(\\dot q/v_s)^2}) \\tanh(\\dot q/\\epsilon)
+           - B_{\\cdot}\\,[\\cos q, \\sin q, \\cos 2q, \\sin 2q]\\big], \\qquad T = \\tfrac12 \\sum I_a \\dot q^2, $$
+
+    each term minus the candidate's torque column (the same ``epsilon`` as the columns). Zero
+    coefficients where a term is absent, so that every model has the same structure."""
+
+    viscous: jnp.ndarray
+    coulomb: jnp.ndarray
+    stribeck: jnp.ndarray  # F_s - F_c
+    velocity: jnp.ndarray  # v_s [rad/s]
+    rotor: jnp.ndarray  # I_a [kg m^2]
+    compensator: jnp.ndarray  # (n, 4)
+    smoothing: jnp.ndarray
+
+    def kinetic_energy(self, robot, slots: Slots, x, xd):
+        # the rotor term's column is I_a qdd: a diagonal mass, hence kinetic energy
+        return 0.5 * jnp.sum(self.rotor * xd[: slots.n] ** 2)
+
+    def generalized_force(self, robot, slots: Slots, t, x, xd, z):
+        n = slots.n
+        q, qd = x[:n], xd[:n]
+        sg = jnp.tanh(qd / self.smoothing)
+        tau = self.viscous * qd + (self.coulomb + self.stribeck * jnp.exp(-((qd / self.velocity) ** 2))) * sg
+        phi = jnp.stack([jnp.cos(q), jnp.sin(q), jnp.cos(2 * q), jnp.sin(2 * q)], axis=1)
+        tau = tau - jnp.sum(self.compensator * phi, axis=1)
+        return jnp.zeros(slots.nx, dtype=x.dtype).at[:n].set(-tau)
+
+
+def simulation_model(robot, tfit) -> Model:
+    """The rigid robot plus the fitted torque terms (none when ``tfit`` is None)."""
+    n = robot.nq
+    p = {k: np.zeros(n) for k in ("viscous", "coulomb", "stribeck", "rotor")}
+    vel = np.ones(n)
+    comp = np.zeros((n, 4))
+    pay = np.zeros(10)
+    k = 0
+    for term in tfit.terms if tfit is not None else ():
+        th = np.asarray(tfit.theta[k:k + term.n_params], float)
+        k += term.n_params
+        j, e = term.joint, term.effect
+        if e == "viscous_friction":
+            p["viscous"][j] += th[0]
+        elif e == "coulomb_friction":
+            p["coulomb"][j] += th[0]
+        elif e == "stribeck_friction":
+            p["coulomb"][j] += th[0]
+            p["stribeck"][j] += th[1]
+            vel[j] = term.hyper
+        elif e == "rotor_inertia":
+            p["rotor"][j] += th[0]
+        elif e == "gravity_compensator":
+            comp[j] += th
+        elif e == "payload":
+            pay += th  # the regressor columns of the last link: its inertia parameters
+    inert = np.asarray(robot.inertia, float).copy()
+    inert[n - 1] += pay
+    eff = FittedTorques(*(jnp.asarray(p[k]) for k in ("viscous", "coulomb", "stribeck")), jnp.asarray(vel),
+                        jnp.asarray(p["rotor"]), jnp.asarray(comp), jnp.asarray(T.EPS_SIGN))
+    return Model(robot.replace(inertia=jnp.asarray(inert)), [eff])
+
+
+@dataclasses.dataclass
+class ResponseSet:
+    """One output-error record: ``y`` (N, k) at ``t`` under ``tau`` from rest at ``q0``."""
+
+    name: str
+    t: np.ndarray
+    tau: np.ndarray
+    y: np.ndarray
+    channels: tuple
+    q0: np.ndarray
+    outputs: tuple  # simulate output names, one per distinct output
+    picks: tuple  # per channel: (index into outputs, component or None)
+    scale: np.ndarray  # (k,) normalisation of each channel [m or rad]: std of a joint channel, the
+    # tip's RMS distance from its mean position for every tip channel
+
+
+def response_set(robot, ds, tool_frame) -> ResponseSet:
+    a = ds.arrays
+    ch = tuple(a["channels"])
+    outputs, picks = [], []
+    for c in ch:
+        name = f"frame:{tool_frame}" if c in TIP_CHANNELS else c
+        if name not in outputs:
+            outputs.append(name)
+        picks.append((outputs.index(name), TIP_CHANNELS.get(c)))
+    y = a["y"]
+    sd = y.std(axis=0)
+    tip = [i for i, c in enumerate(ch) if c in TIP_CHANNELS]
+    scale = np.maximum(sd, 1e-12)
+    if tip:
+        # one scale for the tip coordinates, the RMS distance of the tip from its mean position: an
+        # error counts the same in every direction, and a coordinate the motion hardly moves (x of
+        # a sweep in the y-z plane) does not turn its noise or a small drift into the gap
+        scale[tip] = np.sqrt(np.sum(sd[tip] ** 2))
+    return ResponseSet(ds.name, a["t"], a["tau"], y, ch, a["q0"], tuple(outputs), tuple(picks), np.maximum(scale, 1e-12))
+
+
+@eqx.filter_jit
+def _solve(model, ts, x0, inputs, outputs):
+    r = simulate(model, ts, x0, inputs=inputs, outputs=outputs, rtol=RTOL, atol=ATOL, max_steps=MAX_STEPS, throw=False)
+    return r.outputs
+
+
+def predict(model: Model, s: ResponseSet) -> np.ndarray:
+    """Simulated channels (N, k); NaN where the solve failed."""
+    out = _solve(model, jnp.asarray(s.t), jnp.asarray(s.q0), Sampled(s.t, s.tau), s.outputs)
+    cols = []
+    for i, comp in s.picks:
+        v = np.asarray(out[s.outputs[i]])
+        cols.append(v if comp is None else v[:, comp])
+    return np.stack(cols, axis=1)
+
+
+def residual(model: Model, s: ResponseSet) -> tuple[np.ndarray, bool]:
+    """Normalised output error (N, k) and whether the solve succeeded everywhere."""
+    e = (predict(model, s) - s.y) / s.scale
+    ok = bool(np.all(np.isfinite(e)))
+    return np.nan_to_num(e, nan=FAILED_ERROR, posinf=FAILED_ERROR, neginf=-FAILED_ERROR), ok

@@ -1,0 +1,126 @@
+"""Tip-only response data sets in the gap diagnosis (output error): a planted effect seen only
+through the tool position is found and closes the gap, a null case selects nothing, malformed
+records get errors naming the file and the field, and the simulated model equals the fitted
+torque terms."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import yaml
+
+import jflex
+from jflex.gap import _generate as G
+from jflex.gap import _response as R
+from jflex.gap import _torque as T
+from jflex.gap import diagnose, load_case
+
+TIP_NOISE = 1e-4  # [m]
+
+
+def _truth(folder):
+    folder = pathlib.Path(folder)
+    return json.loads((folder.parent / f"{folder.name}.truth.json").read_text())
+
+
+def test_rotor_inertia_seen_at_the_tip_is_found(tmp_path):
+    # torque training sets, validation only through the tool position of a short motion from rest
+    folder = G.torque_case(tmp_path / "tip", "arm3", ["rotor_inertia"], seed=11, noise=0.01, tip_noise=TIP_NOISE)
+    truth = _truth(folder)["effects"][0]
+    r = diagnose(folder).result
+    assert r["responses_output_error"] == ["tip2"] and r["responses_not_modelled"] == []
+    assert r["significant"]
+    assert [(s["effect"], s["joint"]) for s in r["selected"]][:1] == [("rotor_inertia", truth["joint"])]
+    assert r["gap_before"] > 10 and r["gap_after"] < 0.1 * r["gap_before"]
+    assert r["shrink"] > 80
+    got = r["parameters"]["torque"][f"rotor_inertia@{truth['joint']}"]["Ia [kg m^2]"]
+    assert abs(got - truth["params"]["Ia"]) < 0.05 * truth["params"]["Ia"]
+    # where: tip channels in time windows of the response record
+    w = r["where"][0]
+    assert w["dataset"] == "tip2" and w["channel"] in R.TIP_CHANNELS and "window_s" in w
+    assert {s["channel"] for s in r["where"] if s["dataset"] == "tip2"} <= set(R.TIP_CHANNELS)
+    assert r["steps"][-1]["per_dataset"]["tip2"] == pytest.approx(r["gap_after"])
+    assert r["seconds"] < 120
+
+
+def test_null_tip_case_selects_nothing(tmp_path):
+    folder = G.torque_case(tmp_path / "null", "arm3", [], seed=12, noise=0.01, tip_noise=TIP_NOISE)
+    r = diagnose(folder).result
+    assert r["selected"] == [] and not r["significant"]
+    # the floor from the residual's second difference matches the planted tip noise
+    d = next(d for d in load_case(folder).datasets if d.kind == "response")
+    s = R.response_set(load_case(folder).robot, d, "tool")
+    expected = np.sqrt(np.mean((TIP_NOISE / s.scale) ** 2)) * 100
+    assert 0.7 * expected < r["noise_floor"] < 1.3 * expected
+
+
+def test_simulation_model_torques_equal_the_fitted_terms(tmp_path):
+    # the simulated effect is minus the torque columns it stands for: inverse dynamics of the
+    # simulation model along a torque set = the torque fit's prediction
+    folder = G.torque_case(tmp_path / "sim", "planar2", [], seed=4, n_train=1, n_val=1)
+    c = load_case(folder)
+    s = T.torque_set(c.robot, c.datasets[0])
+    terms = (T.Term("viscous_friction", 0), T.Term("stribeck_friction", 1, T.STRIBECK_VS[2]), T.Term("rotor_inertia", 1),
+             T.Term("gravity_compensator", 0), T.Term("payload", None))
+    theta = np.array([0.7, 1.1, 0.4, 0.05, 2.0, -1.0, 0.5, 0.3, 1.2, 0.02, 0.01, -0.03, 0.01, 0.0, 0.02, 0.0, 0.0, 0.03])
+    fit = T.TorqueFit(terms, 0.0, theta, 0.0)
+    model = R.simulation_model(c.robot, fit)
+    k = 40
+    z = jnp.zeros(0)
+    tau = np.array([jflex.model_inverse_dynamics(model, 0.0, jnp.asarray(s.q[i]), jnp.asarray(s.qd[i]),
+                                                 jnp.asarray(s.qdd[i]), z) for i in range(k)])
+    np.testing.assert_allclose(tau, T.predict(fit, s)[:k], rtol=1e-9, atol=1e-9)
+
+
+# --- malformed tip responses ------------------------------------------------------------------------
+@pytest.fixture
+def tip_folder(tmp_path):
+    return G.torque_case(tmp_path / "ok", "planar2", [], seed=1, n_train=1, n_val=1, tip_noise=TIP_NOISE)
+
+
+def _rewrite(folder, fn):
+    z = dict(np.load(folder / "tip1.npz"))
+    fn(z)
+    np.savez(folder / "tip1.npz", **z)
+
+
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (lambda z: z.pop("q0"), ["tip1.npz", "field 'q0'", "missing", "rest"]),
+        (lambda z: z.update(q0=np.zeros(3)), ["tip1.npz", "field 'q0'", "(2,)", "(3,)"]),
+        (lambda z: z.update(q0=np.zeros((1, 2))), ["tip1.npz", "field 'q0'", "(2,)"]),
+        (lambda z: z.update(channels=np.array(["tip_x", "tip_y", "tip_w"])), ["tip1.npz", "field 'channels'", "tip_w"]),
+        (lambda z: z.update(y=z["y"][:, :2]), ["tip1.npz", "field 'channels'", "3 names for 2 columns"]),
+        (lambda z: z.update(y_repeats=np.zeros((2, 5, 3))), ["tip1.npz", "field 'y_repeats'"]),
+        (lambda z: z.update(t=z["t"][::-1].copy()), ["tip1.npz", "field 't'", "increasing"]),
+    ],
+)
+def test_malformed_tip_response_errors(tip_folder, edit, words):
+    _rewrite(tip_folder, edit)
+    with pytest.raises(jflex.DataError) as e:
+        load_case(tip_folder)
+    for w in words:
+        assert w in str(e.value), str(e.value)
+
+
+def test_tip_response_needs_tool_frame_and_train_split_is_not_fitted(tip_folder):
+    p = tip_folder / "case.yaml"
+    cfg = yaml.safe_load(p.read_text())
+    cfg.pop("tool_frame")
+    p.write_text(yaml.safe_dump(cfg))
+    with pytest.raises(jflex.ConfigError, match=r"case\.yaml: field 'tool_frame': .*datasets\[1\].*tip1\.npz"):
+        load_case(tip_folder)
+    # a tip record in the train split is validated but left out of the fit (scored on validation only)
+    from jflex.gap._diagnose import Problem
+
+    cfg["tool_frame"] = "tool"
+    cfg["datasets"][1]["split"] = "train"
+    cfg["datasets"].append(dict(kind="response", file="tip1.npz", split="validation", name="tip1v"))
+    p.write_text(yaml.safe_dump(cfg))
+    pb = Problem(load_case(tip_folder))
+    assert [d.name for d in pb.responses] == ["tip1"] and [s.name for s in pb.rval] == ["tip1v"]
