@@ -5,9 +5,12 @@ same inputs. Not a test: prints a table with throughputs and ratios.
    eigen-solvers, ``solver="newton"`` and ``"eig"``)
    ``modal_analysis`` vs per posture Pinocchio CRBA + gravity derivatives and
    ``scipy.linalg.eig(A, B)`` of seed 003 Eq. 4.13.
-2. Tool FRFs (3x3 receptance) over N postures x 512 frequencies: jflex ``frf`` (direct; modal with
-   the ``"newton"`` and ``"eig"`` eigen-solvers)
-   vs per posture ``numpy.linalg.solve`` over the 512 frequencies and ``J G J^T``.
+2. Tool FRFs (3x3 receptance) over N postures x 512 frequencies: ``jflex.frf_sweep`` (pole-residue
+   models in chunks of ``--chunk`` postures, FRFs synthesised in blocks of ``--frf-chunk``), keeping
+   only the latest block or storing all; and ``jit(vmap(jflex.frf))`` per ``--frf-chunk`` postures
+   (modal with the ``"newton"`` (and ``"eig"``) eigen-solvers; direct), against per posture
+   ``numpy.linalg.solve`` over the 512 frequencies and ``J G J^T`` (keeping the latest result or
+   storing every result in a preallocated array, to match).
 
     python benchmarks/bench_modal.py [--modal-n 100000] [--frf-n 10000] [--host-devices 1]
 """
@@ -158,6 +161,40 @@ Q2 = rng.uniform(lo, hi, (N2, 3))
 Q2j = jax.numpy.asarray(Q2)
 w = 2 * np.pi * np.linspace(0.5, 60.0, nf)
 ch2 = args.frf_chunk  # postures per call: 64 x 512 x 9 complex outputs (4.7 MB) stay cache- and allocator-friendly
+nb2 = N2 if args.baseline_n == 0 else min(N2, args.baseline_n)
+
+# the SciPy loop twice: keeping only its latest result (as the jflex loops with `consume` do), and
+# storing every result in a preallocated array (as frf_sweep's returned array does)
+t0 = time.perf_counter()
+for q in Q2[:nb2]:
+    G_last = scipy_frf(q, w)
+t_keep = (time.perf_counter() - t0) / nb2
+G_all = np.empty((nb2, nf, 3, 3), complex)
+t0 = time.perf_counter()
+for i, q in enumerate(Q2[:nb2]):
+    G_all[i] = scipy_frf(q, w)
+t_store = (time.perf_counter() - t0) / nb2
+Gref = G_all[:ch2]
+
+
+def rel_err(Gj):
+    return max(np.max(np.abs(Gj[i] - Gref[i])) / np.max(np.abs(Gref[i])) for i in range(min(ch2, nb2)))
+
+
+# (a) jflex.frf_sweep: PoleResidue models args.chunk postures per call, FRFs ch2 per call
+sweep_kw = dict(hold="actuated", frame="tool", chunk_size=args.chunk, block_size=ch2, progress=False)
+t0 = time.perf_counter()
+jflex.frf_sweep(model, Q2[: args.chunk], w, consume=lambda s, H: None, **sweep_kw)
+t_compile = time.perf_counter() - t0
+keep = {}
+_, t_j = timed(lambda: jflex.frf_sweep(model, Q2j, w, consume=lambda s, H: keep.__setitem__("H", H), **sweep_kw))
+rows.append((f"tool FRF 3x3 x {nf} (frf_sweep, keep latest)", N2, t_keep, t_j / N2, float("nan"),
+             rel_err(jflex.frf_sweep(model, Q2[:ch2], w, **sweep_kw)), t_compile))
+res = {}
+_, t_j = timed(lambda: res.setdefault("H", jflex.frf_sweep(model, Q2j, w, **sweep_kw)))
+rows.append((f"tool FRF 3x3 x {nf} (frf_sweep, store all)", N2, t_store, t_j / N2, float("nan"), rel_err(res.pop("H")), 0.0))
+
+# (b) one program per chunk of ch2 postures: jit(vmap(jflex.frf))
 for method, solver in (("modal", "newton"), ("modal", "eig"), ("direct", "eig")) if args.with_eig else (("modal", "newton"), ("direct", "eig")):
     g = jax.jit(jax.vmap(lambda q: jflex.frf(model, q, w, hold="actuated", frame="tool", method=method, solver=solver)))
     t0 = time.perf_counter()
@@ -173,19 +210,8 @@ for method, solver in (("modal", "newton"), ("modal", "eig"), ("direct", "eig"))
 
     _, t_j = timed(run)
     n_j = N2 - N2 % ch2
-    nb2 = N2 if args.baseline_n == 0 else min(N2, args.baseline_n)
-    if solver == "newton":
-        # the SciPy loop keeps only its latest result, as jflex's loop does (storing 1e4 x 73 kB
-        # of results made it 1.5-2x slower here); the reference for the error check is separate
-        t0 = time.perf_counter()
-        for q in Q2[:nb2]:
-            G_last = scipy_frf(q, w)
-        t_s2 = time.perf_counter() - t0
-        Gref = [scipy_frf(q, w) for q in Q2[:ch2]]
-    Gj = np.asarray(g(Q2[:ch2]))
-    m = min(ch2, nb2)
-    err = max(np.max(np.abs(Gj[i] - Gref[i])) / np.max(np.abs(Gref[i])) for i in range(m))
-    rows.append((f"tool FRF 3x3 x {nf} freqs ({method}, {solver}), per posture", N2, t_s2 / nb2, t_j / n_j, float("nan"), err, t_compile))
+    rows.append((f"tool FRF 3x3 x {nf} (jit(vmap(frf)) {method}, {solver})", N2, t_keep, t_j / n_j, float("nan"),
+                 rel_err(np.asarray(g(Q2[:ch2]))), t_compile))
 
 print()
 print(f"{'case':48s} {'N':>7s} {'SciPy us':>10s} {'jflex us':>10s} {'ratio':>7s} {'sweep us':>9s} {'max rel diff':>12s} {'compile s':>9s}")

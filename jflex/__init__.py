@@ -96,6 +96,7 @@ from ._config import (
 from . import linear as linear
 from .linear import (
     frf as frf,
+    frf_sweep as frf_sweep,
     mac as mac,
     modal_analysis as modal_analysis,
     stability_lobes as stability_lobes,

@@ -7,6 +7,7 @@ Joint space: ``G_theta(w) = (K0 - w^2 M0 + i w C0)^-1`` (direct form) or its mod
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -69,7 +70,7 @@ def frf_matrices(M, C, K, omega, *, kind: str = "receptance", method: str = "dir
     omega = check_frequencies(omega)
     M, C, K = (jnp.asarray(A, dtype=float) for A in (M, C, K))
     if method == "modal" and solver == "newton":
-        H = _pair_frf(M, C, K, omega, T)
+        return synthesize_frf(pole_residue_matrices(M, C, K, T=T, solver="newton"), omega, kind=kind)
     elif method == "modal":
         H = modal_frf(eigen(M, C, K), omega, T=T)
     else:
@@ -80,23 +81,63 @@ def frf_matrices(M, C, K, omega, *, kind: str = "receptance", method: str = "dir
     return H * _kind_factor(omega, kind)[:, None, None]
 
 
-def _pair_frf(M, C, K, omega, T):
-    """Modal expansion of underdamped modes with each conjugate pair summed in closed form.
+class PoleResidue(eqx.Module):
+    """Pole-residue model of an FRF matrix over underdamped modes (what EMA software stores):
+
+    ``H(i w) = sum_r R_r / (i w - lambda_r) + conj(R_r) / (i w - conj(lambda_r))``.
+
+    - ``pole`` (m,) complex lambda_r with Im > 0 [rad/s].
+    - ``residue`` (p, p, m) complex R_r = u_r u_r^T / a_r with u_r the shape at the output
+      (e.g. ``J psi_r`` at the tool) [m/N/s or rad/(N m s)].
+
+    Built by :func:`pole_residue`; :func:`synthesize_frf` evaluates it on a frequency grid. The
+    split lets a posture sweep solve the eigenproblems in large batches and synthesise the
+    (large) FRF arrays in cache-sized blocks (:func:`jflex.frf_sweep`).
+    """
+
+    pole: jnp.ndarray
+    residue: jnp.ndarray
+
+
+def pole_residue_matrices(M, C, K, *, T=None, solver: str = "newton") -> PoleResidue:
+    """:class:`PoleResidue` of ``M x'' + C x' + K x = f`` with output/input map ``T`` (p, n)
+    (None: the coordinates themselves). Every mode must be underdamped; ``solver`` as in
+    :func:`jflex.linear.eigen` (``"newton"`` raises otherwise; with ``"eig"`` an overdamped or
+    rigid-body mode raises here)."""
+    check_solver(solver)
+    M, C, K = (jnp.asarray(A, dtype=float) for A in (M, C, K))
+    n = M.shape[0]
+    e = eigen(M, C, K, solver=solver)
+    if solver == "newton":
+        top = jnp.arange(n)  # the first n eigenpairs are the Im > 0 halves
+    else:
+        top = jnp.argsort(-e.eigenvalue.imag)[:n]
+    lam, psi, a = e.eigenvalue[top], e.shape[:, top], e.a[top]
+    if solver == "eig":
+        lam = eqx.error_if(
+            lam, jnp.any(~(lam.imag > 0)),
+            "pole-residue FRF: a mode is overdamped or rigid (real eigenvalue); use method='direct' or 'modal' with frf()",
+        )
+    u = psi if T is None else T @ psi
+    return PoleResidue(lam, u[:, None, :] * u[None, :, :] / a)
+
+
+def synthesize_frf(pr: PoleResidue, omega, *, kind: str = "receptance"):
+    """FRF (nf, p, p) of a symmetric :class:`PoleResidue` model on the grid ``omega`` [rad/s].
 
     For a pole lambda = alpha + i beta with residue R, R / (i w - lambda) + conj(R) / (i w -
     conj(lambda)) = 2 (U + i w V) / (|lambda|^2 - w^2 - 2 i alpha w) with V = Re R and
     U = -alpha Re R - beta Im R: real numerators and one complex reciprocal per mode and
-    frequency, half the work of the 2n-pole sum."""
-    n = M.shape[0]
-    e = eigen(M, C, K, solver="newton")  # the first n pairs are the Im > 0 halves
-    lam, psi, a = e.eigenvalue[:n], e.shape[:, :n], e.a[:n]
-    u = psi if T is None else T @ psi
-    R = u[:, None, :] * u[None, :, :] / a  # (p, p, n)
-    al, be = lam.real, lam.imag
+    frequency, half the work of the 2n-pole sum. Only the upper triangle is computed (the
+    residues of a reciprocal system are symmetric)."""
+    if kind not in _KINDS:
+        raise ShapeError(f"synthesize_frf: kind must be one of {_KINDS}, got '{kind}'")
+    omega = check_frequencies(omega)
+    lam, R = pr.pole, pr.residue
     p = R.shape[0]
-    # the FRF matrix is symmetric: the upper triangle only, in real arithmetic (vectorises better)
+    al, be = lam.real, lam.imag
     iu, ju = np.triu_indices(p)
-    Rr, Ri = R.real[iu, ju], R.imag[iu, ju]  # (p(p+1)/2, n)
+    Rr, Ri = R.real[iu, ju], R.imag[iu, ju]  # (p(p+1)/2, m)
     V = 2.0 * Rr
     U = 2.0 * (-al * Rr - be * Ri)
     ne = len(iu)
@@ -110,12 +151,53 @@ def _pair_frf(M, C, K, omega, T):
         for e in range(ne):
             Hr[e] = Hr[e] + U[e, r] * dr - V[e, r] * wdi
             Hi[e] = Hi[e] + U[e, r] * di + V[e, r] * wdr
+    if kind == "mobility":  # x i w, in the real planes (no complex pass over the output)
+        Hr, Hi = [-omega * h for h in Hi], [omega * h for h in Hr]
+    elif kind == "accelerance":  # x -w^2
+        Hr, Hi = [-(omega**2) * h for h in Hr], [-(omega**2) * h for h in Hi]
     H = [jax.lax.complex(Hr[e], Hi[e]) for e in range(ne)]
     index = {}
     for k, (i, j) in enumerate(zip(iu, ju)):
         index[i, j] = index[j, i] = k
     # one interleaving stack into (nf, p, p) (a gather from the triangle was a slow extra pass)
     return jnp.stack([H[index[i, j]] for i in range(p) for j in range(p)], axis=-1).reshape(omega.shape[0], p, p)
+
+
+def _frequency_dependent(model: Model, x0):
+    r, lay = model.rigid, model.layout
+    return [e for e, s in zip(model.effects, lay.slots) if e.dynamic_stiffness(r, s, x0, 1.0) is not None]
+
+
+def _require_viscous(model: Model, x0, what: str):
+    extras = _frequency_dependent(model, x0)
+    if extras:
+        names = sorted({type(e).__name__ for e in extras})
+        raise ParameterError(
+            f"{what} needs a viscous model, but {names} add frequency-dependent stiffness; use method='direct'"
+        )
+
+
+def pole_residue(
+    model: Model,
+    posture,
+    *,
+    hold=(),
+    frame=None,
+    reference: str = "local_world_aligned",
+    components: str = "linear",
+    solver: str = "newton",
+) -> PoleResidue:
+    """Pole-residue model of ``model``'s FRF at a posture (the modal form of :func:`frf`).
+
+    Arguments as in :func:`frf`; every mode must be underdamped and the model viscous (no
+    frequency-dependent effect). ``synthesize_frf(pole_residue(model, q, ...), omega, kind=k)``
+    equals ``frf(model, q, omega, ..., kind=k, method="modal")``.
+    """
+    check_solver(solver)
+    x0, lin = linearization(model, posture, hold)
+    _require_viscous(model, x0, "pole_residue")
+    T = None if frame is None else tool_jacobian(model, x0, lin.keep, frame, reference, components)
+    return pole_residue_matrices(lin.M, lin.C, lin.K, T=T, solver=solver)
 
 
 def modal_frf(e: Eigen, omega, *, T=None):
@@ -166,14 +248,10 @@ def frf(
     T = None if frame is None else tool_jacobian(model, x0, lin.keep, frame, reference, components)
     r, lay = model.rigid, model.layout
     idx = jnp.array(lin.keep, dtype=int)
-    extras = [e for e, s in zip(model.effects, lay.slots) if e.dynamic_stiffness(r, s, x0, 1.0) is not None]
-    if not extras:
+    if not _frequency_dependent(model, x0):
         return frf_matrices(lin.M, lin.C, lin.K, omega, kind=kind, method=method, T=T, solver=solver)
     if method == "modal":
-        names = sorted({type(e).__name__ for e in extras})
-        raise ParameterError(
-            f"frf: method='modal' needs a viscous model, but {names} add frequency-dependent stiffness; use method='direct'"
-        )
+        _require_viscous(model, x0, "frf: method='modal'")
 
     def one(w):
         D = lin.K - w**2 * lin.M + 1j * w * lin.C
@@ -226,4 +304,7 @@ def half_power_damping(omega, H):
     return jnp.where(ok, (wr - wl) / (2 * wpk), jnp.nan), wpk
 
 
-__all__ = ["frf", "frf_matrices", "modal_frf", "half_power_damping", "expand_posture", "resolve_hold"]
+__all__ = [
+    "PoleResidue", "frf", "frf_matrices", "modal_frf", "pole_residue", "pole_residue_matrices", "synthesize_frf",
+    "half_power_damping", "expand_posture", "resolve_hold",
+]

@@ -1,0 +1,129 @@
+"""FRFs over a posture sweep in two stages: eigenproblems in large batches, FRF arrays in small
+blocks.
+
+The two halves of a modal FRF want opposite batch sizes on a CPU. The linearisation and the
+eigenproblem are a few hundred small fused loops whose per-call cost is spread over the batch
+(4-6 us per posture at 1e3-1e4 postures against ~9 at 64, measured on the 3-joint arm of
+``benchmarks/bench_modal.py``). The synthesised FRF is 73 kB per posture (512 frequencies,
+3x3 complex), so it stays in cache only in blocks of a few tens of postures (a block of 64 is
+1.5-2x faster than one of 256-1024 there). :func:`frf_sweep` therefore solves the
+:class:`~jflex.linear.PoleResidue` models chunk by chunk and synthesises each chunk's FRFs
+block by block.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import ShapeError
+from .._model import Model
+from .._sweep import _progress, _tune_allocator_once
+from ._common import check_frequencies
+from ._frf import _check_kind_method, frf, pole_residue, synthesize_frf
+
+
+def _padded(a, n):
+    # repeat the last item so every call has one compiled shape
+    pad = n - a.shape[0]
+    return a if pad == 0 else jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)])
+
+
+# module-level programs (the model traced, the options static): repeated sweeps over the same
+# model structure reuse one compilation
+@eqx.filter_jit
+def _poles(model, Q, kw):
+    return jax.vmap(lambda q: pole_residue(model, q, **dict(kw)))(Q)
+
+
+@eqx.filter_jit
+def _synthesize(items, omega, kind):
+    return jax.vmap(lambda pr: synthesize_frf(pr, omega, kind=kind))(items)
+
+
+@eqx.filter_jit
+def _direct(model, Q, omega, kind, kw):
+    return jax.vmap(lambda q: frf(model, q, omega, kind=kind, method="direct", **dict(kw)))(Q)
+
+
+def frf_sweep(
+    model: Model,
+    postures,
+    omega,
+    *,
+    hold=(),
+    frame=None,
+    reference: str = "local_world_aligned",
+    components: str = "linear",
+    kind: str = "receptance",
+    method: str = "modal",
+    solver: str = "newton",
+    chunk_size: int = 4096,
+    block_size: int = 64,
+    consume: Callable | None = None,
+    progress: bool = True,
+    label: str = "frf_sweep",
+):
+    """FRFs of ``model`` at every posture of ``postures`` (N, n) on the grid ``omega`` (nf,).
+
+    **Arguments:**
+
+    - ``model``, ``hold``, ``frame``, ``reference``, ``components``, ``kind``, ``solver``: as in
+      :func:`jflex.frf`.
+    - ``method``: ``"modal"`` (default; viscous models with underdamped modes): the
+      :class:`~jflex.linear.PoleResidue` models are solved ``chunk_size`` postures per call and
+      the FRFs synthesised ``block_size`` postures per call. ``"direct"``: :func:`jflex.frf`'s
+      direct form (any effect, e.g. hysteretic or fractional damping), ``block_size`` per call.
+    - ``consume``: ``consume(start, H)`` receives each finished block, ``H`` (b, nf, p, p) a
+      NumPy array for postures ``start:start + b``, valid during the call only (copy what you
+      keep). Without it the result is returned whole.
+    - ``progress``: a progress bar on stderr.
+
+    **Returns:** complex (N, nf, p, p) NumPy array, or None when ``consume`` is given.
+    Calls :func:`jflex.tune_allocator` first (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
+    """
+    _check_kind_method(kind, method)
+    omega = check_frequencies(omega)
+    Q = jnp.asarray(postures, dtype=float)
+    if Q.ndim != 2 or Q.shape[0] == 0:
+        raise ShapeError(f"frf_sweep: postures must be (N, n) with N >= 1, got shape {Q.shape}")
+    for name, v in (("chunk_size", chunk_size), ("block_size", block_size)):
+        if int(v) != v or v < 1:
+            raise ShapeError(f"frf_sweep: {name} must be a positive integer, got {v!r}")
+    _tune_allocator_once()
+    N = Q.shape[0]
+    block = min(block_size, N)
+    chunk = max(block, min(chunk_size, N) // block * block)  # whole blocks per chunk
+    hold = hold if isinstance(hold, str) else tuple(hold)
+    kw = (("hold", hold), ("frame", frame), ("reference", reference), ("components", components), ("solver", solver))
+    if method == "modal":
+        stage1 = lambda Qc: _poles(model, Qc, kw)
+        stage2 = lambda items: _synthesize(items, omega, kind)
+    else:
+        stage1 = lambda Qc: Qc
+        stage2 = lambda Qb: _direct(model, Qb, omega, kind, kw)
+    out = None
+    t0 = time.perf_counter()
+    for c0 in range(0, N, chunk):
+        c1 = min(c0 + chunk, N)
+        items = stage1(_padded(Q[c0:c1], chunk))
+        for b0 in range(c0, c1, block):
+            b1 = min(b0 + block, c1)
+            H = np.asarray(stage2(jax.tree_util.tree_map(lambda a: a[b0 - c0 : b0 - c0 + block], items)))[: b1 - b0]
+            if consume is not None:
+                consume(b0, H)
+            else:
+                if out is None:
+                    out = np.empty((N,) + H.shape[1:], H.dtype)
+                out[b0:b1] = H
+        if progress:
+            _progress(c1, N, t0, label)
+    return out
+
+
+__all__ = ["frf_sweep"]
