@@ -7,7 +7,20 @@ on the virgin curve ``F = f(x)`` (odd extension of ``y``); after a reversal at `
 travel since the last reversal ``u``, the force ``F`` and the branch factor ``s`` (1 on the virgin
 curve, 2 after the first reversal), integrated as ``dF/dt = y'(|u|/s) dx/dt``. A reversal
 (``u dx/dt < 0``) resets ``u`` to 0 at the rate ``reversal_rate`` [1/s] (large: a stiff but
-continuous stand-in for the jump), and ``s`` relaxes to 2. The re-joining of the virgin curve
+continuous stand-in for the jump), and ``s`` relaxes to 2.
+
+Travel-driven reversal (``reversal_width`` [m] given): the reset runs at the rate ``|dx/dt| / width``
+instead, i.e. ``u`` decays by ``exp(-travel / width)`` over the reverse travel, independent of time,
+as a rate-independent hysteresis should. Why: with the time-driven reset a reversal that travels
+back a nanometre for a millisecond (a higher mode's ripple on a slow swing) resets ``u`` fully, so
+the force, and every response after it, jumps as a parameter moves the ripple across zero; an
+output-error cost is then discontinuous (seed 004: factors 2-10 between neighbouring ``delta``).
+With the travel-driven reset the right-hand side is Lipschitz in the states (the reset term
+``|v| u / width`` vanishes at ``v = 0`` and at ``u = 0``), a reversal of travel ``a`` changes ``u`` by
+a fraction ``~ a / width``, and the response is a continuous function of ``h0`` and ``delta``.
+As ``width -> 0`` the element tends to the Masing rule: the force lags the explicit rule by about
+``y'(0) width = 2 h0 width / delta`` after each reversal (tested against :func:`masing_force`).
+The re-joining of the virgin curve
 beyond the previous maximum amplitude (the last sentence of the rule after Eq. 26) is not modelled:
 in a decaying free vibration the amplitude never exceeds it.
 """
@@ -49,7 +62,10 @@ class Hysteretic(AbstractDampingLaw):
     """Hysteretic damping: complex stiffness in frequency, Masing element in time.
 
     **Arguments:** ``eta`` loss factor (frequency domain, Eq. 22); ``h0`` [N] and ``delta`` [m]
-    (virgin curve Eq. 27, time domain); ``reversal_rate`` [1/s] of the memory reset (default 1e4).
+    (virgin curve Eq. 27, time domain); ``reversal_rate`` [1/s] of the time-driven memory reset
+    (default 1e4); ``reversal_width`` [m] (default None): if given, the reset is driven by the
+    reverse travel instead (``u`` decays as ``exp(-travel / reversal_width)``; ``reversal_rate`` is
+    then unused), which makes the response continuous in the parameters (see the module docstring).
     The element acts on ``P e`` (the owner's projection, e.g. a beam's tip deflection).
     """
 
@@ -57,16 +73,21 @@ class Hysteretic(AbstractDampingLaw):
     h0: jnp.ndarray
     delta: jnp.ndarray
     reversal_rate: jnp.ndarray
+    reversal_width: jnp.ndarray | None
 
-    def __init__(self, eta=0.0, h0=0.0, delta=1e-3, reversal_rate=1e4):
+    def __init__(self, eta=0.0, h0=0.0, delta=1e-3, reversal_rate=1e4, reversal_width=None):
         for k, v in {"eta": eta, "h0": h0}.items():
             if not np.isfinite(v) or float(v) < 0:
                 raise ParameterError(f"Hysteretic.{k} must be >= 0, got {v}")
-        for k, v in {"delta": delta, "reversal_rate": reversal_rate}.items():
+        pos = {"delta": delta, "reversal_rate": reversal_rate}
+        if reversal_width is not None:
+            pos["reversal_width"] = reversal_width
+        for k, v in pos.items():
             if not np.isfinite(v) or not float(v) > 0:
-                raise ParameterError(f"Hysteretic.{k} must be > 0, got {v}")
+                raise ParameterError(f"Hysteretic.{k} must be > 0 [{'m' if k != 'reversal_rate' else '1/s'}], got {v}")
         self.eta, self.h0 = jnp.asarray(float(eta)), jnp.asarray(float(h0))
         self.delta, self.reversal_rate = jnp.asarray(float(delta)), jnp.asarray(float(reversal_rate))
+        self.reversal_width = None if reversal_width is None else jnp.asarray(float(reversal_width))
 
     def state_suffixes(self, m, r):
         return tuple(f"hyst{i}_{k}" for i in range(r) for k in ("u", "F", "s"))
@@ -89,7 +110,9 @@ class Hysteretic(AbstractDampingLaw):
         u, F, s = Z[:, 0], Z[:, 1], Z[:, 2]
         v = P @ ed
         rev = (u * v < 0).astype(v.dtype)
-        lam = self.reversal_rate
+        # time-driven: a fixed rate; travel-driven: |v| / width, so the reset depends on how far the
+        # motion has gone back, not for how long, and vanishes continuously as v -> 0
+        lam = self.reversal_rate if self.reversal_width is None else jnp.abs(v) / self.reversal_width
         kt = 2.0 * self.h0 * self.delta**2 / (self.delta + jnp.abs(u) / s) ** 3
         du = v - lam * u * rev
         dF = kt * v
