@@ -15,7 +15,8 @@ import numpy as np
 from .._errors import ParameterError, ShapeError
 from .._model import Model
 from ._common import check_frequencies, expand_posture, linearization, resolve_hold, tool_jacobian
-from ._modal import Eigen, check_solver, eigen
+from ._modal import Eigen, check_solver, eigen, modal_a
+from ._qep import qep_newton
 
 _KINDS = ("receptance", "mobility", "accelerance")
 _METHODS = ("direct", "modal")
@@ -107,13 +108,13 @@ def pole_residue_matrices(M, C, K, *, T=None, solver: str = "newton") -> PoleRes
     check_solver(solver)
     M, C, K = (jnp.asarray(A, dtype=float) for A in (M, C, K))
     n = M.shape[0]
-    e = eigen(M, C, K, solver=solver)
-    if solver == "newton":
-        top = jnp.arange(n)  # the first n eigenpairs are the Im > 0 halves
+    if solver == "newton":  # the Im > 0 halves only (eigen() would also build their conjugates)
+        lam, psi = qep_newton(M, C, K)
+        a = modal_a(lam, psi, M, C)
     else:
+        e = eigen(M, C, K, solver=solver)
         top = jnp.argsort(-e.eigenvalue.imag)[:n]
-    lam, psi, a = e.eigenvalue[top], e.shape[:, top], e.a[top]
-    if solver == "eig":
+        lam, psi, a = e.eigenvalue[top], e.shape[:, top], e.a[top]
         lam = eqx.error_if(
             lam, jnp.any(~(lam.imag > 0)),
             "pole-residue FRF: a mode is overdamped or rigid (real eigenvalue); use method='direct' or 'modal' with frf()",

@@ -95,8 +95,12 @@ def eigen(M, C, K, *, solver: str = "eig") -> Eigen:
         # expansion, normalised shapes) is invariant to each eigenvector's scale, so they are valid
         lam, V = jax.lax.linalg.eig(A, compute_left_eigenvectors=False, enable_eigvec_derivs=True)
         psi = V[:n]
-    a = 2 * lam * jnp.einsum("ir,ij,jr->r", psi, M, psi) + jnp.einsum("ir,ij,jr->r", psi, C, psi)
-    return Eigen(lam, psi, a)
+    return Eigen(lam, psi, modal_a(lam, psi, M, C))
+
+
+def modal_a(lam, psi, M, C):
+    """``a_r = psi_r^T (2 lambda_r M + C) psi_r`` of each eigenpair (columns of ``psi``)."""
+    return 2 * lam * jnp.einsum("ir,ij,jr->r", psi, M, psi) + jnp.einsum("ir,ij,jr->r", psi, C, psi)
 
 
 def _normalise(psi):
