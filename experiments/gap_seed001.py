@@ -47,7 +47,7 @@ import numpy as np  # noqa: E402
 import jflex  # noqa: E402
 from jflex.effects import FlexibleJoints  # noqa: E402
 from jflex.gap._diagnose import (  # noqa: E402
-    MIN_GAP, MIN_STEP_SHRINK, SIGNIFICANCE, _combine, _ic_delta, _mad_sigma, _rank, _significant,
+    MIN_GAP, MIN_STEP_SHRINK, SIGNIFICANCE, _combine, _ic_delta, _mad_sigma, _rank, _significant, forward_select,
 )
 from jflex.identify import Free, Log, ParameterSpec  # noqa: E402
 
@@ -482,37 +482,27 @@ def ladder(cfg, recs, say=print):
         sc = -_ic_delta(f["ev"], ev0, N_PARAMS[c])
         ranking.append(_entry(c, f["ev"], ev0, ev0, floor_d, sc, f["params"]))
     ranking = [ranking[i] for i in _rank(ranking)]
-    # forward selection
-    selected, cur_effects, cur_values, ev_cur = [], (), {}, ev0
+    # forward selection: the loop of jflex.gap.diagnose; a state is try_step's record (None: nominal)
+
+    def refit(state, c):
+        f = try_step(() if state is None else state["effects"], {} if state is None else state["values"], c)
+        return f, f["ev"]
+
+    def on_select(st):
+        say(f"gap_seed001: selected {st.cand} ({EFFECTS[st.cand]['effect']}): gap {_combine(st.ev, floor_d)[0]:.2f} %")
+
+    sel = forward_select(None, ev0, floor_d, cands, refit, n_params=lambda c: N_PARAMS[c], max_effects=len(cands),
+                         on_select=on_select)
+    selected = [_entry(st.cand, st.ev, ev0, st.ev_before, floor_d, st.score, st.state["params"]) for st in sel.steps]
     steps_log = [dict(added=None, variant="F.L-R.H", gap=gap0, excess=exc0, per_dataset={"validation": gap0})]
-    stop_reason = "not significant" if not significant else None
-    while significant and len(cur_effects) < len(cands):
-        best = None
-        _, _, exc_cur = _combine(ev_cur, floor_d)
-        for c in cands:
-            if c in cur_effects:
-                continue
-            f = try_step(cur_effects, cur_values, c)
-            sc = -_ic_delta(f["ev"], ev_cur, N_PARAMS[c])
-            _, _, exc = _combine(f["ev"], floor_d)
-            step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
-            keyv = (round(step_shrink), sc)
-            if best is None or keyv > best[0]:
-                best = (keyv, c, f, sc, step_shrink)
-        if best is None:
-            break
-        _, c, f, sc, step_shrink = best
-        if sc <= 0 or step_shrink < MIN_STEP_SHRINK:
-            stop_reason = f"best next step {c} closes {step_shrink:.1f} % of the excess (< {MIN_STEP_SHRINK} %) or does not pay its parameters"
-            break
-        selected.append(_entry(c, f["ev"], ev0, ev_cur, floor_d, sc, f["params"]))
-        cur_effects, cur_values, ev_cur = f["effects"], f["values"], f["ev"]
-        g, _, e = _combine(ev_cur, floor_d)
-        steps_log.append(dict(added=c, variant=variant_of(cur_effects), gap=g, excess=e, per_dataset={"validation": g}))
-        say(f"gap_seed001: selected {c} ({EFFECTS[c]['effect']}): gap {g:.2f} %")
-        if not _significant(ev_cur, floor_d):
-            stop_reason = "the remaining gap is within the noise floor"
-            break
+    for st in sel.steps:
+        g, _, e = _combine(st.ev, floor_d)
+        steps_log.append(dict(added=st.cand, variant=variant_of(st.state["effects"]), gap=g, excess=e, per_dataset={"validation": g}))
+    ev_cur = sel.ev
+    rej = sel.rejected
+    stop_reason = {"not significant": "not significant", "within noise": "the remaining gap is within the noise floor",
+                   "too small": None if rej is None else f"best next step {rej.cand} closes {rej.step_shrink:.1f} % of the "
+                   f"excess (< {MIN_STEP_SHRINK} %) or does not pay its parameters"}.get(sel.stop)
     # the ladder's rungs: the selected ones, then (ladder.complete) the rest on top, not selected
     chain, eff, vals = [], (), {}
     for s in selected:

@@ -33,7 +33,8 @@ import numpy as np
 
 import jflex
 from jflex import fem
-from jflex.gap._diagnose import MIN_GAP, MIN_STEP_SHRINK, SIGNIFICANCE, _combine, _ic_delta, _mean_of, _rank, _significant
+from jflex.gap._diagnose import (MIN_GAP, SIGNIFICANCE, _combine, _ic_delta, _mean_of, _rank, _significant,
+                                forward_select, step_record)
 
 NAME = "gap_seed002"
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -321,39 +322,25 @@ def diagnose(model: PressModel, data: Data, p: dict, say=print):
         say(f"  {c}: scale {np.exp(th[0]):.3f}, gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
     order = _rank(ranking)
     ranking = [ranking[i] for i in order]
-    steps = [dict(added=None, gap=gap0, excess=exc0, per_dataset={k: v["nrmse"] for k, v in ev0.items()})]
-    selected, state, ev_cur = [], ((), np.zeros(0), curves["nominal"]), ev0
-    while significant and len(selected) < p["max_effects"]:
-        _, _, exc_cur = _combine(ev_cur, floor)
-        best = None
-        for c in p["candidates"]:
-            if c in state[0]:
-                continue
-            if not selected:
-                effects, th, dev, ev = fitted[c]
-            else:
-                effects = state[0] + (c,)
-                th, dev, _ = fit(model, data, effects, np.r_[state[1], 0.0], p["grid"], p["steps"])
-                ev = data.evaluate(dev)
-            score = -_ic_delta(ev, ev_cur, 1)
-            _, _, exc = _combine(ev, floor)
-            step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
-            key = (round(step_shrink), score)
-            if best is None or key > best[0]:
-                best = (key, effects, th, dev, ev, score, step_shrink)
-        if best is None:
-            break
-        _, effects, th, dev, ev, score, step_shrink = best
-        if score <= 0 or step_shrink < MIN_STEP_SHRINK:
-            break
-        selected.append(_entry(effects, ev, ev0, floor, score, th))
-        selected[-1]["step_shrink"] = float(step_shrink)
-        state, ev_cur = (effects, th, dev), ev
-        g, _, e = _combine(ev, floor)
-        steps.append(dict(added=effects[-1], gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()}))
-        say(f"selected {effects[-1]}: gap {g:.2f} %")
-        if not _significant(ev, floor):
-            break
+    # forward selection: the loop of jflex.gap.diagnose; a state is (effects, theta, deviation)
+
+    def refit(state, c):
+        effects = state[0] + (c,)
+        th, dev, _ = fit(model, data, effects, np.r_[state[1], 0.0], p["grid"], p["steps"])
+        return (effects, th, dev), data.evaluate(dev)
+
+    def on_select(st):
+        say(f"selected {st.cand}: gap {_combine(st.ev, floor)[0]:.2f} %")
+
+    sel = forward_select(((), np.zeros(0), curves["nominal"]), ev0, floor, p["candidates"], refit, n_params=lambda c: 1,
+                         max_effects=p["max_effects"], first={c: (v[:3], v[3]) for c, v in fitted.items()},
+                         on_select=on_select)
+    selected = []
+    for st in sel.steps:
+        selected.append(_entry(st.state[0], st.ev, ev0, floor, st.score, st.state[1]))
+        selected[-1]["step_shrink"] = st.step_shrink
+    steps = [step_record(None, ev0, floor)] + [step_record(st.cand, st.ev, floor) for st in sel.steps]
+    state, ev_cur = sel.state, sel.ev
     ambiguous = []
     if len(ranking) >= 2 and significant:
         a, b = ranking[0], ranking[1]

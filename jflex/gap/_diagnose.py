@@ -505,6 +505,97 @@ def _rank(entries) -> list[int]:
     return order
 
 
+@dataclasses.dataclass
+class Step:
+    """One forward-selection step: ``cand`` added to the model before it (``ev_before``)."""
+
+    cand: object
+    state: object
+    ev: dict
+    ev_before: dict
+    score: float  # held-out information-criterion gain (-_ic_delta against the model before)
+    step_shrink: float  # % of the excess before this step that it closed
+
+
+@dataclasses.dataclass
+class Selection:
+    """Result of :func:`forward_select`: the steps taken, the final model and why it stopped:
+    ``"not significant"`` (nothing to explain), ``"max effects"``, ``"no candidate"``,
+    ``"too small"`` (``rejected``, the best next step, closes < MIN_STEP_SHRINK % of the excess or
+    does not pay its parameters) or ``"within noise"`` (what remains is not significant)."""
+
+    steps: list
+    state: object
+    ev: dict
+    stop: str
+    rejected: Step | None = None
+
+
+def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
+                   simpler=None, first=None, on_select=None) -> Selection:
+    """Forward selection on held-out data, the rules of :func:`diagnose`: each round refits every
+    candidate not yet added on top of the current model, takes the one closing the most of the
+    current excess gap (rounded to a point, so that noise-level differences tie; the information
+    criterion breaks ties), and adds it only when it pays its parameters (held-out BIC) and closes
+    at least ``MIN_STEP_SHRINK`` % of the current excess; it stops once the gap is within noise.
+
+    **Arguments:**
+
+    - ``state0``, ``ev0``: the nominal model (opaque to this loop) and its validation evaluation
+      (``{name: {"nrmse", "neff", ...}}``); ``floor``: noise floor per validation set.
+    - ``candidates``: a list, or ``callable(state, round) -> list`` for a pool that changes with the model.
+    - ``refit(state, cand) -> (new_state, ev)``: ``cand`` added to ``state``, refitted on training
+      data and evaluated on validation data (the caller caches where it can).
+    - ``n_params(cand)``: parameters the candidate adds (the criterion's penalty).
+    - ``simpler(rich, simple) -> bool``: optional; a simpler effect nested in a richer one at the
+      same place wins when it closes within ``PARSIMONY`` points of it.
+    - ``first``: optional ``{cand: (state, ev)}`` of first-round refits already made.
+    - ``on_select(step)``: optional callback after each selected step.
+    """
+    if not _significant(ev0, floor):
+        return Selection([], state0, ev0, "not significant")
+    steps, state, ev_cur, chosen = [], state0, ev0, []
+    while True:
+        if len(steps) >= max_effects:
+            return Selection(steps, state, ev_cur, "max effects")
+        _, _, exc_cur = _combine(ev_cur, floor)
+        pool = candidates(state, len(steps)) if callable(candidates) else candidates
+        best = None
+        for c in pool:
+            if c in chosen:
+                continue
+            st, ev = first[c] if (first is not None and not steps and c in first) else refit(state, c)
+            score = -_ic_delta(ev, ev_cur, n_params(c))
+            _, _, exc = _combine(ev, floor)
+            step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
+            key = (round(step_shrink), score)
+            if simpler is not None and best is not None:
+                if simpler(best[1].cand, c) and step_shrink >= best[1].step_shrink - PARSIMONY:
+                    key = (best[0][0], best[0][1] + 1e-9, 1)  # the simpler nested effect wins a near tie
+                elif simpler(c, best[1].cand) and best[1].step_shrink >= step_shrink - PARSIMONY:
+                    key = (-np.inf, -np.inf)
+            if best is None or key > best[0]:
+                best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink)))
+        if best is None:
+            return Selection(steps, state, ev_cur, "no candidate")
+        step = best[1]
+        if step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK:
+            return Selection(steps, state, ev_cur, "too small", step)
+        steps.append(step)
+        chosen.append(step.cand)
+        state, ev_cur = step.state, step.ev
+        if on_select is not None:
+            on_select(step)
+        if not _significant(ev_cur, floor):
+            return Selection(steps, state, ev_cur, "within noise")
+
+
+def step_record(added, ev, floor) -> dict:
+    """The ``steps`` entry of a diagnosis: the gap after ``added`` (None: nominal)."""
+    g, _, e = _combine(ev, floor)
+    return dict(added=added, gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()})
+
+
 def _n_params(c: Candidate) -> int:
     return {"stribeck_friction": 3, "gravity_compensator": 4, "payload": 10, "orthogonal_compliance": 4,
             "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2}.get(c.effect, 1)
@@ -727,52 +818,31 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     order = _rank(ranking)
     ranking = [ranking[i] for i in order]
     keep = [keep[i] for i in order]
-    # forward selection
-    steps = [dict(added=None, gap=gap0, excess=exc0, per_dataset={k: v["nrmse"] for k, v in ev0.items()})]
-    selected, state, ev_cur = [], nom, ev0
-    pool = list(keep)
-    while significant and len(selected) < max_effects and pool:
-        _, _, exc_cur = _combine(ev_cur, floor)
-        best = None
-        if selected:
-            # the residual changed: rank the signatures again so effects masked by the first
-            # (larger) one get their turn
-            sig_k = signatures(pb, state, cands)
-            tc_k = sorted([c for c in cands if c in sig_k], key=lambda c: -sig_k[c])
-            pool = tc_k[:prune] + [c for c in cands if c not in sig_k]
-        for c in pool:
-            if any(c.effect == s.effect and c.joint == s.joint for s in state.added):
-                continue
-            if not selected:
-                st, ev = fitted[c]
-            else:
-                st = pb.add(state, c)
-                ev = pb.evaluate(st)
-            score = -_ic_delta(ev, ev_cur, _n_params(c))
-            _, _, exc = _combine(ev, floor)
-            step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
-            key = (round(step_shrink), score)
-            if best is not None and NESTED.get(best[1].effect) == c.effect and best[1].joint == c.joint \
-                    and step_shrink >= best[5] - PARSIMONY:
-                key = (best[0][0], best[0][1] + 1e-9, 1)  # the simpler nested effect wins a near tie
-            elif best is not None and NESTED.get(c.effect) == best[1].effect and best[1].joint == c.joint \
-                    and best[5] >= step_shrink - PARSIMONY:
-                key = (-np.inf, -np.inf)
-            if best is None or key > best[0]:
-                best = (key, c, st, ev, score, step_shrink)
-        if best is None:
-            break
-        _, c, st, ev, score, step_shrink = best
-        if score <= 0 or step_shrink < MIN_STEP_SHRINK:
-            break
-        selected.append(_entry(pb, c, ev, ev0, floor, score))
-        selected[-1]["step_shrink"] = float(step_shrink)
-        state, ev_cur = st, ev
-        g, _, e = _combine(ev, floor)
-        steps.append(dict(added=c.label(pb.names), gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()}))
-        say(f"selected {c.label(pb.names)}: gap {g:.2f} %")
-        if not _significant(ev, floor):
-            break
+    # forward selection; after the first step the residual changed: the signatures are ranked
+    # again so that effects masked by the first (larger) one get their turn
+    def pool(state, k):
+        if k == 0:
+            return keep
+        sig_k = signatures(pb, state, cands)
+        tc_k = sorted([c for c in cands if c in sig_k], key=lambda c: -sig_k[c])
+        return tc_k[:prune] + [c for c in cands if c not in sig_k]
+
+    def refit(state, c):
+        st = pb.add(state, c)
+        return st, pb.evaluate(st)
+
+    def on_select(step):
+        say(f"selected {step.cand.label(pb.names)}: gap {_combine(step.ev, floor)[0]:.2f} %")
+
+    sel = forward_select(nom, ev0, floor, pool, refit, n_params=_n_params, max_effects=max_effects if keep else 0,
+                         simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
+                         first=fitted, on_select=on_select)
+    selected = []
+    for st in sel.steps:
+        selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score))
+        selected[-1]["step_shrink"] = st.step_shrink
+    steps = [step_record(None, ev0, floor)] + [step_record(st.cand.label(pb.names), st.ev, floor) for st in sel.steps]
+    state, ev_cur = sel.state, sel.ev
     # ambiguity: a known confounded pair whose held-out scores are too close to call
     ambiguous = []
     if len(ranking) >= 2 and significant:
