@@ -202,31 +202,34 @@ def _cantilever(law, modes=1):
     return jflex.Model(robot, [_HubHold(jnp.asarray(500.0)), jflex.effects.FlexibleLink("hub", beam, damping=law, name="beam")])
 
 
-def _hysteretic_recovery(t_end, n, start):
+def _hysteretic_recovery(t_end, n, start, width=1e-5):
     """Tip free vibration of a cantilever with a Masing (hysteretic) element, noise-free: h0 and
-    delta recovered from a start off by ``start`` factors."""
+    delta recovered from a start off by ``start`` factors. The element's reversal is
+    travel-driven (``width`` [m]), the same in record and fit: with the time-driven reset the
+    response, and the cost, jump with delta (see jflex/effects/_hysteresis.py)."""
     H = jflex.effects.Hysteretic
     h0, delta = 0.02 * 0.189, 4.884e-4  # seed-004 Table V: k_e h0 [N], delta [m]
-    true = _cantilever(H(0.02, h0, delta, 2000.0))
+    true = _cantilever(H(0.02, h0, delta, reversal_width=width))
     ts = np.linspace(0, t_end, n, endpoint=False)
     x0 = np.zeros(true.nx)
     x0[1] = 0.01  # 10 mm tip deflection (phi(1) = 1)
     kw = dict(rtol=1e-6, atol=1e-9)
-    y = jflex.simulate(true, ts, x0=jnp.asarray(x0), outputs=("beam.tip_deflection",), **kw)["beam.tip_deflection"]
+    y = jflex.simulate(true, ts, x0=jnp.asarray(x0), outputs=("beam.tip_deflection",), rtol=1e-9, atol=1e-12)["beam.tip_deflection"]
     data = idf.TimeData(ts, {"beam.tip_deflection": np.asarray(y)}, x0=x0, simulate_kw=kw, name="tip")
     spec = idf.ParameterSpec([idf.Free("h0", lambda m: m.effects[1].damping.h0, transform=idf.Log()),
                               idf.Free("delta", lambda m: m.effects[1].damping.delta, transform=idf.Log())])
-    res = idf.fit(_cantilever(H(0.02, h0 * start[0], delta * start[1], 2000.0)), spec, data, optx.LevenbergMarquardt(rtol=1e-6, atol=1e-6),
-                  progress=False, max_steps=20)
+    res = idf.fit(_cantilever(H(0.02, h0 * start[0], delta * start[1], reversal_width=width)), spec, data,
+                  idf.levenberg_marquardt(1e-6, 1e-6), progress=False, max_steps=30, stall=3)
     return res, h0, delta
 
 
 def test_time_response_fit_recovers_hysteretic_damping():
-    # A +/-10 % start: from +/-50 % the amplitude-dependent frequency shift of the Masing
-    # element makes the output-error cost multimodal (see experiments/identify_seed004.py).
-    res, h0, delta = _hysteretic_recovery(1.0, 40, (1.1, 0.9))
+    # +50 % h0, -50 % delta, as in experiments/identify_seed004.py; 0.6 s (24 samples) is enough
+    # for the 1-mode cantilever (measured: -5e-5 and +5e-4 off in 11 steps; the remaining error is
+    # the fit's solve tolerance, stall=3 stops it there)
+    res, h0, delta = _hysteretic_recovery(0.6, 24, (1.5, 0.5))
     assert np.allclose(res.values["h0"], h0, rtol=1e-3)
-    assert np.allclose(res.values["delta"], delta, rtol=1e-3)
+    assert np.allclose(res.values["delta"], delta, rtol=2e-3)
     assert res.nrmse["tip:beam.tip_deflection"] < 1e-3
     assert res.timing["jacobian_evals"] <= res.steps + 1  # one residual-and-Jacobian solve per step
 
