@@ -81,6 +81,17 @@ def _compute_outputs(model, names, inputs, ts, xs, xds, zs):
     return {name: jax.vmap(_resolve_output(model, name))(ts, xs, xds, zs, us) for name in names}
 
 
+def effect_output(model: Model, name: str):
+    """``(x, xd, z) -> value`` of the first effect providing the output ``name`` (e.g.
+    ``"beam.tip_position"``), or None. Effects answer ``None`` for names they do not know, so a
+    probe at the zero state resolves the name once, outside any trace."""
+    r, lay = model.rigid, model.layout
+    for e, s in zip(model.effects, lay.slots):
+        if e.output(r, s, name, jnp.zeros(lay.nx), jnp.zeros(lay.nx), jnp.zeros(lay.nz)) is not None:
+            return lambda x, xd, z, e=e, s=s: e.output(r, s, name, x, xd, z)
+    return None
+
+
 def _resolve_output(model: Model, name: str):
     """A function ``(t, x, xd, z, u) -> value`` for one output name (static resolution)."""
     r, lay = model.rigid, model.layout
@@ -110,10 +121,9 @@ def _resolve_output(model: Model, name: str):
         fr = name[len("frame:"):]
         r.frame_index(fr)  # raises a named error for an unknown frame
         return lambda t, x, xd, z, u: frame_placement(r, x[:n], fr)[:3, 3]
-    for e, s in zip(model.effects, lay.slots):
-        probe = e.output(r, s, name, jnp.zeros(lay.nx), jnp.zeros(lay.nx), jnp.zeros(lay.nz))
-        if probe is not None:
-            return lambda t, x, xd, z, u, e=e, s=s: e.output(r, s, name, x, xd, z)
+    fn = effect_output(model, name)
+    if fn is not None:
+        return lambda t, x, xd, z, u: fn(x, xd, z)
     known = list(simple) + ["work"] + list(lay.coord_names) + [c + "_d" for c in lay.coord_names]
     known += list(lay.state_names) + ["frame:<name>", "<effect>.<output> (e.g. beam.tip_deflection, beam.strain@0.3)"]
     raise ShapeError(f"simulate: unknown output '{name}'; known outputs: {known}")

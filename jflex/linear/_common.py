@@ -12,6 +12,7 @@ import numpy as np
 from .._dynamics import jacobian
 from .._errors import ParameterError, ShapeError
 from .._model import Model, input_matrix, linearize
+from .._simulate import effect_output
 
 
 def expand_posture(model: Model, posture):
@@ -76,13 +77,14 @@ def linearization(model: Model, posture, hold=()):
 
 
 def _effect_output(model: Model, name: str):
-    """``x -> value`` of an effect output such as ``"beam.tip_position"``, or None."""
-    r, lay = model.rigid, model.layout
+    """``x -> value`` of an effect output such as ``"beam.tip_position"`` at rest (zero rates and
+    internal states), or None: the output resolution of :func:`jflex.simulate`."""
+    fn = effect_output(model, name)
+    if fn is None:
+        return None
+    lay = model.layout
     zx, zz = jnp.zeros(lay.nx), jnp.zeros(lay.nz)
-    for e, s in zip(model.effects, lay.slots):
-        if e.output(r, s, name, zx, zx, zz) is not None:
-            return lambda x, e=e, s=s: e.output(r, s, name, x, zx, zz)
-    return None
+    return lambda x: fn(x, zx, zz)
 
 
 def tool_jacobian(model: Model, x0, keep, frame, reference: str, components: str):
