@@ -29,6 +29,9 @@ after step and its Cauchy test, which needs an accepted step, may never fire; th
 failure to reach the minimum, is why the fractional fit used to stop at its 40-iteration cap).
 
 Outcome (last run, 300 samples over 3 s, 1 % noise, NRMSE noise floor 0.040):
+(The viscous and fractional lines below are from the record of the time-driven law; on the
+current record, travel-driven law: viscous k_e = 0.0546 +/- 0.0042 s, NRMSE 0.80; fractional
+k_e = 0.0558 +/- 0.009, alpha = 0.979 +/- 0.057, NRMSE 0.83, 307 s.)
 - viscous: k_e = 0.044 +/- 0.004 s, NRMSE 0.81 (Table V 7.0e-4 s from the real arm); 11
   iterations, 84 s (56 s of it the first solve and compilation).
 - fractional: k_e = 0.0586 +/- 0.009, alpha = 0.869 +/- 0.054, NRMSE 0.79 (Table V 0.028,
