@@ -13,6 +13,7 @@ block by block.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 
@@ -41,9 +42,12 @@ def _poles(model, Q, kw):
     return jax.vmap(lambda q: pole_residue(model, q, **dict(kw)))(Q)
 
 
-@eqx.filter_jit
-def _synthesize(items, omega, kind):
-    return jax.vmap(lambda pr: synthesize_frf(pr, omega, kind=kind))(items)
+# jax.jit rather than eqx.filter_jit, and the block sliced inside: one cheap dispatch per block
+# (~20 us against ~45 us plus two eager slices, per 64 postures)
+@functools.partial(jax.jit, static_argnames=("kind", "block"))
+def _synthesize(items, start, omega, kind, block):
+    sub = jax.tree_util.tree_map(lambda a: jax.lax.dynamic_slice_in_dim(a, start, block), items)
+    return jax.vmap(lambda pr: synthesize_frf(pr, omega, kind=kind))(sub)
 
 
 @eqx.filter_jit
@@ -103,27 +107,37 @@ def frf_sweep(
     kw = (("hold", hold), ("frame", frame), ("reference", reference), ("components", components), ("solver", solver))
     if method == "modal":
         stage1 = lambda Qc: _poles(model, Qc, kw)
-        stage2 = lambda items: _synthesize(items, omega, kind)
+        stage2 = lambda items, start: _synthesize(items, start, omega, kind, block)
     else:
         stage1 = lambda Qc: Qc
-        stage2 = lambda Qb: _direct(model, Qb, omega, kind, kw)
+        stage2 = lambda Qc, start: _direct(model, jax.lax.dynamic_slice_in_dim(Qc, start, block), omega, kind, kw)
     out = None
+
+    def finish(b0, b1, H):
+        nonlocal out
+        H = np.asarray(H)[: b1 - b0]
+        if consume is not None:
+            consume(b0, H)
+            return
+        if out is None:
+            out = np.empty((N,) + H.shape[1:], H.dtype)
+        out[b0:b1] = H
+
     t0 = time.perf_counter()
+    pending = None
     for c0 in range(0, N, chunk):
         c1 = min(c0 + chunk, N)
         items = stage1(_padded(Q[c0:c1], chunk))
         for b0 in range(c0, c1, block):
-            b1 = min(b0 + block, c1)
-            H = np.asarray(stage2(jax.tree_util.tree_map(lambda a: a[b0 - c0 : b0 - c0 + block], items)))[: b1 - b0]
-            if consume is not None:
-                consume(b0, H)
-            else:
-                if out is None:
-                    out = np.empty((N,) + H.shape[1:], H.dtype)
-                out[b0:b1] = H
+            # dispatch the next block before waiting for the last (JAX dispatches asynchronously):
+            # the Python side of a call overlaps the previous block's computation
+            H = stage2(items, np.int32(b0 - c0))
+            if pending is not None:
+                finish(*pending)
+            pending = (b0, min(b0 + block, c1), H)
         if progress:
             _progress(c1, N, t0, label)
+    finish(*pending)
     return out
-
 
 __all__ = ["frf_sweep"]
