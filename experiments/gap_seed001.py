@@ -484,14 +484,14 @@ def ladder(cfg, recs, say=print):
     ranking = [ranking[i] for i in _rank(ranking)]
     # forward selection: the loop of jflex.gap.diagnose; a state is try_step's record (None: nominal)
 
-    def refit(state, c):
+    def add_step(state, c):  # (the module's refit() is the fit itself)
         f = try_step(() if state is None else state["effects"], {} if state is None else state["values"], c)
         return f, f["ev"]
 
     def on_select(st):
         say(f"gap_seed001: selected {st.cand} ({EFFECTS[st.cand]['effect']}): gap {_combine(st.ev, floor_d)[0]:.2f} %")
 
-    sel = forward_select(None, ev0, floor_d, cands, refit, n_params=lambda c: N_PARAMS[c], max_effects=len(cands),
+    sel = forward_select(None, ev0, floor_d, cands, add_step, n_params=lambda c: N_PARAMS[c], max_effects=len(cands),
                          on_select=on_select)
     selected = [_entry(st.cand, st.ev, ev0, st.ev_before, floor_d, st.score, st.state["params"]) for st in sel.steps]
     steps_log = [dict(added=None, variant="F.L-R.H", gap=gap0, excess=exc0, per_dataset={"validation": gap0})]
