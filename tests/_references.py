@@ -95,3 +95,15 @@ def fe_beam_matrices(L, m, EI, ne=60):
         K[i, i] += ke
         M[i, i] += me
     return K, M
+
+
+def light_system(n, seed):
+    """A random n-DOF M, C, K with non-proportional damping of a few % (underdamped modes)."""
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n))
+    M = A @ A.T + n * np.eye(n)
+    B = rng.normal(size=(n, n))
+    K = 100.0 * (B @ B.T + n * np.eye(n))
+    D = rng.normal(size=(n, n))
+    C = 0.02 * (D @ D.T) + 1e-3 * K
+    return M, C, K

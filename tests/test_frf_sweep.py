@@ -6,19 +6,9 @@ import numpy as np
 import pytest
 
 import jflex
+from _references import light_system
 from jflex.effects import FlexibleJoints, Hysteretic, StructuralDamping
 from jflex.linear import PoleResidue, pole_residue, pole_residue_matrices, synthesize_frf
-
-
-def _light_system(n, seed):
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(n, n))
-    M = A @ A.T + n * np.eye(n)
-    B = rng.normal(size=(n, n))
-    K = 100.0 * (B @ B.T + n * np.eye(n))
-    D = rng.normal(size=(n, n))
-    C = 0.02 * (D @ D.T) + 1e-3 * K  # non-proportional, a few % damping
-    return M, C, K
 
 
 @pytest.mark.parametrize("solver", ["newton", "eig"])
@@ -26,7 +16,7 @@ def _light_system(n, seed):
                                          ("accelerance", lambda w: -(w**2))])
 def test_synthesized_frf_equals_direct_inverse(solver, kind, factor):
     n = 4
-    M, C, K = _light_system(n, 3)
+    M, C, K = light_system(n, 3)
     T = np.random.default_rng(1).normal(size=(3, n))
     w = np.linspace(0.0, 40.0, 97)
     pr = pole_residue_matrices(M, C, K, T=T, solver=solver)

@@ -5,6 +5,7 @@ import pytest
 import scipy.linalg as sla
 
 import jflex
+from _references import light_system
 from jflex.linear import eigen, frf_matrices, half_power_damping, mac, modes, track_modes
 
 _TOL = 1e-9
@@ -164,20 +165,9 @@ def test_bad_kind_or_method():
 # ---- solver="newton": Newton's method from the undamped modes ---------------------------------
 
 
-def _light_system(n, seed):
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(n, n))
-    M = A @ A.T + n * np.eye(n)
-    B = rng.normal(size=(n, n))
-    K = 100.0 * (B @ B.T + n * np.eye(n))
-    D = rng.normal(size=(n, n))
-    C = 0.02 * (D @ D.T) + 1e-3 * K  # non-proportional, a few % damping
-    return M, C, K
-
-
 @pytest.mark.parametrize("n,seed", [(1, 0), (3, 1), (6, 2), (6, 3)])
 def test_newton_solver_matches_scipy_eig(n, seed):
-    M, C, K = _light_system(n, seed)
+    M, C, K = light_system(n, seed)
     Z = np.zeros((n, n))
     lam = sla.eig(-np.block([[K, Z], [Z, -M]]), np.block([[C, M], [M, Z]]), right=False)
     ref = np.sort_complex(lam[lam.imag > 0])
@@ -198,7 +188,7 @@ def test_newton_solver_matches_scipy_eig(n, seed):
 def test_newton_solver_gradients_match_finite_differences():
     import jax
 
-    M, C, K = _light_system(3, 5)
+    M, C, K = light_system(3, 5)
 
     def f(s):
         md = modes(M * s[0], C * s[1], K * s[2], solver="newton")
@@ -214,7 +204,7 @@ def test_newton_solver_gradients_match_finite_differences():
 def test_default_solver_is_differentiable():
     import jax
 
-    M, C, K = _light_system(3, 6)
+    M, C, K = light_system(3, 6)
     f = lambda s: jax.numpy.sum(modes(M, C * s, K).damping_ratio) + jax.numpy.abs(modes(M, C * s, K).shape[1, 0])
     h = 1e-6
     assert abs(float(jax.grad(f)(1.0)) - (f(1 + h) - f(1 - h)) / (2 * h)) < 1e-5 * max(1.0, abs(float(jax.grad(f)(1.0))))
