@@ -124,3 +124,39 @@ def test_tip_response_needs_tool_frame_and_train_split_is_not_fitted(tip_folder)
     p.write_text(yaml.safe_dump(cfg))
     pb = Problem(load_case(tip_folder))
     assert [d.name for d in pb.responses] == ["tip1"] and [s.name for s in pb.rval] == ["tip1v"]
+
+
+def test_joint_flexibility_seen_at_the_tip_is_found(tmp_path):
+    # springs fitted on FRF training data (motors held) are simulated in the tip set: the applied
+    # torque drives the motor side (the stated rotor inertia), the spring the link. The nominal
+    # model lacks the spring at one joint; the tip record is the only validation set.
+    from jflex.gap._report import write_report
+
+    folder = G.frf_case(tmp_path / "flex", "arm3", ["joint_flexibility"], seed=3, n_post=2, tip_noise=TIP_NOISE,
+                        frf_validation=False)
+    truth = _truth(folder)["effects"][0]
+    d = diagnose(folder)
+    r = d.result
+    assert r["responses_output_error"] == ["tip"] and r["significant"]
+    assert [(s["effect"], s["joint"]) for s in r["selected"]][:1] == [("joint_flexibility", truth["joint"])]
+    g0, g1 = (r["steps"][k]["per_dataset"]["tip"] for k in (0, -1))
+    assert g1 < 0.2 * g0 and r["shrink"] > 80
+    k = r["parameters"]["linear"][truth["joint"]]["stiffness [N m/rad]"]
+    assert abs(k - truth["params"]["k"]) < 0.1 * truth["params"]["k"]
+    assert r["failed_solves"] == [] and r["seconds"] < 120
+    # the report plots measured vs nominal vs final tip traces and links them
+    md = write_report(d, tmp_path / "out").read_text()
+    assert (tmp_path / "out" / "response_tip.png").is_file() and "(response_tip.png)" in md
+
+
+def test_failed_solves_are_recorded(tmp_path):
+    # torques a thousand times too large from mid-record: the simulation runs away; its samples
+    # beyond the 1000 % cap are counted in diagnosis.json and listed in the report
+    from jflex.gap._report import markdown
+
+    folder = G.torque_case(tmp_path / "fail", "planar2", [], seed=1, n_train=1, n_val=1, tip_noise=TIP_NOISE)
+    _rewrite(folder, lambda z: z["tau"].__setitem__(slice(len(z["tau"]) // 2, None), z["tau"][len(z["tau"]) // 2:] * 1e3))
+    r = diagnose(folder, max_effects=0, prune=0).result
+    f = r["failed_solves"]
+    assert [(e["model"], e["dataset"]) for e in f] == [("nominal", "tip1")] and 0 < f[0]["samples"] <= f[0]["of"] == 300
+    assert "Failed or diverged simulations" in markdown(r, [])

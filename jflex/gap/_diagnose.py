@@ -88,6 +88,13 @@ class Problem:
         self.responses = [d for d in case.split("train") if _is_output_error(d)]
         self.nominal = {(e["effect"], self.names.index(j)) for e in case.nominal_effects for j in e["joints"]}
         self.nominal_effects = case.nominal_effects
+        # rotor inertia [kg m^2] the case states (nominal rotor_inertia with a value): the motor
+        # side of a simulated spring when no torque training set fits it
+        self.rotor_nominal = np.zeros(self.n)
+        for e in case.nominal_effects:
+            if e["effect"] == "rotor_inertia" and "value" in e:
+                for j, v in zip(e["joints"], e["value"]):
+                    self.rotor_nominal[self.names.index(j)] = v
 
     # --- nominal model -------------------------------------------------------------------------
     def nominal_state(self) -> State:
@@ -331,6 +338,44 @@ class Problem:
                 out.append(float(a["freq"][np.argmax(e)]))
         return out
 
+    # --- simulation of output-error sets -----------------------------------------------------------
+    def sim_springs(self, state: State) -> dict:
+        """``{joint: (k, c)}`` of the joint springs a tip simulation holds: those of the linear
+        model (fitted on FRF/modal data), else the stiffness/damping the case declares for its
+        nominal flexible joints. A hysteretic or fractional law enters as the viscous damping (and
+        stiffness) with the same complex stiffness at the reference frequency (the median measured
+        mode): a time simulation needs a causal law of fixed structure."""
+        out = {}
+        if state.lm is not None:
+            sp = state.lm.structure.springs
+            S = len(sp)
+            w = 2 * np.pi * (self._ref_freq() if self.ftrain else 10.0)
+            for i, s in enumerate(sp):
+                if s.kind != "joint":
+                    continue
+                k, v = float(np.exp(state.x[i])), float(np.exp(state.x[S + i]))
+                if s.law == "hysteretic":
+                    c = v * k / w
+                elif s.law == "fractional":
+                    c = v * w ** (s.alpha - 1) * np.sin(s.alpha * np.pi / 2)
+                    k = k + v * w**s.alpha * np.cos(s.alpha * np.pi / 2)
+                else:
+                    c = v
+                out[s.where] = (k, c)
+            return out
+        for e in self.nominal_effects:
+            if e["effect"] == "joint_flexibility" and "stiffness" in e:
+                c = e.get("damping", 1e-3 * e["stiffness"])
+                for j, kj, cj in zip(e["joints"], e["stiffness"], c):
+                    if kj > 0:
+                        out[self.names.index(j)] = (float(kj), float(cj))
+        return out
+
+    def simulation_model(self, state: State):
+        """The model a tip (output-error) set is simulated with (:func:`._response.simulation_model`);
+        rotor inertia from the nominal ``value`` when no torque training set fits it."""
+        return R.simulation_model(self.robot, state.tfit, self.sim_springs(state), None if self.ttrain else self.rotor_nominal)
+
     # --- evaluation ----------------------------------------------------------------------------
     def evaluate(self, state: State, sets="validation") -> dict:
         """Per data set: nrmse [%], per channel [%], mse and effective sample count."""
@@ -338,13 +383,13 @@ class Problem:
         fsets = self.fval if sets == "validation" else self.ftrain
         out = {}
         if sets == "validation" and self.rval:
-            model = R.simulation_model(self.robot, state.tfit)
+            model = self.simulation_model(state)
             for s in self.rval:
-                e, ok = R.residual(model, s)
+                e, failed = R.residual(model, s)
                 ch = np.sqrt(np.mean(e**2, axis=0)) * 100
                 out[s.name] = dict(kind="response", nrmse=float(np.sqrt(np.mean(e**2)) * 100),
                                    channels={c: float(v) for c, v in zip(s.channels, ch)}, neff=e.size / 10.0,
-                                   resid=e, solved=ok)
+                                   resid=e, failed=failed, samples=len(e))
         for s in tsets:
             pred = T.predict(state.tfit, s)
             e = (pred - s.tau) / s.scale
@@ -808,9 +853,11 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     keep = tc[:prune] + [c for c in cands if c not in sig]
     say(f"gap {gap0:.2f} % (noise floor {fl:.2f} %), {len(cands)} candidates, {len(keep)} refitted")
     ranking, fitted = [], {}
+    failed = _failed_solves("nominal", ev0)
     for c in keep:
         st = pb.add(nom, c)
         ev = pb.evaluate(st)
+        failed += _failed_solves(c.label(pb.names), ev)
         score = -_ic_delta(ev, ev0, _n_params(c))
         fitted[c] = (st, ev)
         ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c)))
@@ -829,7 +876,9 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
 
     def refit(state, c):
         st = pb.add(state, c)
-        return st, pb.evaluate(st)
+        ev = pb.evaluate(st)
+        failed.extend(_failed_solves(" + ".join(a.label(pb.names) for a in st.added), ev))
+        return st, ev
 
     def on_select(step):
         say(f"selected {step.cand.label(pb.names)}: gap {_combine(step.ev, floor)[0]:.2f} %")
@@ -863,10 +912,18 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
         unmatched_modes=[w for w in wh if w.get("unmatched")],
         responses_output_error=[s.name for s in pb.rval],
         responses_not_modelled=[d.name for d in pb.responses],
+        failed_solves=failed,
         seconds=time.perf_counter() - t0,
         units={"gap": "NRMSE %", "noise_floor": "NRMSE %", "shrink": "% of the excess over noise closed"},
     )
     return Diagnosis(result, pb, nom, state, steps)
+
+
+def _failed_solves(model: str, ev: dict) -> list:
+    """``failed_solves`` entries of one evaluated model: per output-error set whose simulation
+    failed or diverged, the samples left non-finite or beyond 1000 % (counted at that cap)."""
+    return [dict(model=model, dataset=k, samples=int(v["failed"]), of=int(v["samples"]))
+            for k, v in ev.items() if v.get("failed")]
 
 
 def _parameters(pb: Problem, st: State) -> dict:

@@ -337,10 +337,42 @@ def torque_case(folder, robot_name, truths, seed, noise=0.01, nominal_friction=F
 FRF_FREQ = np.geomspace(3.0, 80.0, 360)
 
 
-def frf_case(folder, robot_name, truths, seed, noise=0.01, n_post=3):
+def flexible_tip_response(robot, K, C, Im, rng, tip_noise, q0=None, T=1.5, amp=0.3, f0=0.6, coupling=False):
+    """A tip-only response record of a robot with a viscous torsion spring at every joint
+    (stiffness ``K``, damping ``C``, rotor inertia ``Im`` on the motor side; ``coupling``: the
+    rotor spins with its carrying link, the full model, which no candidate holds):
+    the applied motor torques are the rigid feed-forward (with the rotor inertia) of a smooth
+    motion from rest at ``q0``; the truth is simulated under them from rest (springs preloaded
+    by gravity) and its tool position recorded with white noise ``tip_noise`` [m]."""
+    import diffrax
+
+    from .. import simulate
+    from .._inputs import Sampled
+    from .._model import Model
+    from ..effects import FlexibleJoints
+
+    n = robot.nq
+    q0 = rng.uniform(-0.6, 0.6, n) if q0 is None else np.asarray(q0, float)
+    tt, q, qd, qdd = rest_trajectory(n, rng, q0, T=T, amp=amp, f0=f0)
+    tau = rigid_torque(robot, q, qd, qdd) + np.asarray(Im)[None] * qdd
+    model = Model(robot, [FlexibleJoints(jnp.asarray(K, float), jnp.asarray(C, float), jnp.asarray(Im, float), coupling=coupling)])
+    g = rigid_torque(robot, q0[None], np.zeros((1, n)), np.zeros((1, n)))[0]
+    x0 = np.concatenate([q0, q0 + g / np.asarray(K, float)])
+    r = simulate(model, tt, jnp.asarray(x0), inputs=Sampled(tt, tau), outputs=("frame:tool",), solver=diffrax.Dopri8(),
+                 rtol=1e-9, atol=1e-11, max_steps=400_000)
+    y = np.asarray(r.outputs["frame:tool"]) + tip_noise * rng.standard_normal((tt.size, 3))
+    return dict(t=tt, tau=tau, y=y, channels=np.array(["tip_x", "tip_y", "tip_z"]), q0=q0)
+
+
+def frf_case(folder, robot_name, truths, seed, noise=0.01, n_post=3, tip_noise=None, frf_validation=True):
     """An FRF case on a robot with flexible joints (motors held), 2 training and 1-2 validation
     postures; ``truths``: effect names among joint_flexibility, orthogonal_compliance,
-    link_flexibility, hysteretic_damping, fractional_damping, payload."""
+    link_flexibility, hysteretic_damping, fractional_damping, payload.
+
+    ``tip_noise`` [m]: add a tip-only validation ``response`` set simulated from the truth
+    (:func:`flexible_tip_response`; ``truths`` among joint_flexibility), the rotor inertias stated
+    in the nominal model (``rotor_inertia`` with ``value``); ``frf_validation=False``: every FRF
+    posture is a training set (the tip set is the only validation set)."""
     rng = np.random.default_rng(seed)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -413,4 +445,17 @@ def frf_case(folder, robot_name, truths, seed, noise=0.01, n_post=3):
     nominal = [dict(effect="joint_flexibility", joint=[robot.joint_names[j] for j in nominal_joints],
                     stiffness=[float(kj[j] * rng.uniform(0.85, 1.15)) for j in nominal_joints],
                     damping=[float(cj[j]) for j in nominal_joints])]
+    if not frf_validation:
+        dsets = [(k, nm, "train", a) for k, nm, _, a in dsets]
+    if tip_noise is not None:
+        if set(truths) - {"joint_flexibility"}:
+            raise ValueError(f"frf_case: a tip response is simulated for joint_flexibility truths only, got {truths}")
+        from .._dynamics import crba
+
+        Mjj = np.diag(np.asarray(crba(robot, jnp.zeros(n))))
+        Im = Mjj * rng.uniform(0.15, 0.3, n)
+        dsets.append(("response", "tip", "validation", flexible_tip_response(robot, kj, cj, Im, rng, tip_noise, T=1.0, f0=2.0, amp=0.25)))
+        nominal.append(dict(effect="rotor_inertia", joint="all", value=[float(v) for v in Im]))
+        for t_ in truth:
+            t_["params"]["rotor_inertia"] = [float(v) for v in Im]
     return write_case(folder, robot_name, dsets, nominal, truth=dict(effects=truth, family="frf", robot=robot_name, noise=noise))

@@ -90,6 +90,7 @@ def _plots(diag, out: pathlib.Path) -> list[str]:
         fig.savefig(out / "heat_mode_posture.png", dpi=110)
         plt.close(fig)
         files.append("heat_mode_posture.png")
+    files += _response_plots(diag, out, plt)
     # waterfall of the gap as effects are added
     steps = r["steps"]
     fig, ax = plt.subplots(figsize=(6, 3.5))
@@ -108,6 +109,44 @@ def _plots(diag, out: pathlib.Path) -> list[str]:
     fig.savefig(out / "waterfall.png", dpi=110)
     plt.close(fig)
     files.append("waterfall.png")
+    return files
+
+
+def _response_plots(diag, out: pathlib.Path, plt) -> list[str]:
+    """One figure per output-error (tip) set: measured, nominal and final simulated channels over
+    time (left) and both residuals (right), one row per channel."""
+    from . import _response as R
+
+    pb = diag.problem
+    if not pb.rval:
+        return []
+    files = []
+    models = [("nominal", pb.simulation_model(diag.nominal)), ("final", pb.simulation_model(diag.final))]
+    for s in pb.rval:
+        preds = [(lab, R.predict(m, s)) for lab, m in models]
+        k = len(s.channels)
+        fig, axs = plt.subplots(k, 2, figsize=(11, 2.2 * k + 0.6), squeeze=False, sharex=True)
+        for i, ch in enumerate(s.channels):
+            unit = "m" if ch in R.TIP_CHANNELS else "rad"
+            ax, ax2 = axs[i]
+            ax.plot(s.t, s.y[:, i], "k", lw=1.2, label="measured")
+            for (lab, y), st in zip(preds, ("C0--", "C3")):
+                ax.plot(s.t, y[:, i], st, lw=1.0, label=lab)
+                ax2.plot(s.t, y[:, i] - s.y[:, i], st, lw=1.0, label=f"{lab} - measured")
+            ax.set_ylabel(f"{ch} [{unit}]")
+            ax2.set_ylabel(f"residual [{unit}]")
+            ax2.axhline(0.0, color="k", lw=0.5)
+            if i == 0:
+                ax.legend(fontsize=8)
+                ax2.legend(fontsize=8)
+        axs[-1, 0].set_xlabel("time [s]")
+        axs[-1, 1].set_xlabel("time [s]")
+        fig.suptitle(f"{s.name}: simulated from rest at q0 under the recorded torques")
+        fig.tight_layout()
+        name = f"response_{''.join(c if c.isalnum() or c in '-_' else '_' for c in s.name)}.png"
+        fig.savefig(out / name, dpi=110)
+        plt.close(fig)
+        files.append(name)
     return files
 
 
@@ -163,8 +202,19 @@ def markdown(r: dict, plots) -> str:
     L += ["", "## Fitted parameters of the final model", "", "```", _params(r["parameters"]), "```", ""]
     if r.get("responses_output_error"):
         L.append(f"Response data sets {r['responses_output_error']} were compared as output error: the model simulated "
-                 "under their applied torques from rest at their q0 (torque-side terms only; sensor delay, backlash "
-                 "and FRF-fitted springs are not simulated).")
+                 "under their applied torques from rest at their q0 (the torque-side terms and the joint springs with "
+                 "the rotor inertia on their motor side; sensor delay, backlash and the orthogonal and link "
+                 "compliances are not simulated).")
+        tips = [p for p in plots if p.startswith("response_")]
+        if tips:
+            L.append("Measured vs nominal vs final traces and residuals: " + ", ".join(f"[{p}]({p})" for p in tips) + ".")
+    if r.get("failed_solves"):
+        L += ["", "**Failed or diverged simulations** (their samples count at a 1000 % error):", "",
+              "| model | data set | samples | of |", "|---|---|---|---|"]
+        for f in r["failed_solves"][:20]:
+            L.append(f"| {f['model']} | {f['dataset']} | {f['samples']} | {f['of']} |")
+        if len(r["failed_solves"]) > 20:
+            L.append(f"| ... {len(r['failed_solves']) - 20} more in diagnosis.json | | | |")
     if r["responses_not_modelled"]:
         L.append(f"Response data sets {r['responses_not_modelled']} were validated but not used: they lack a channel for "
                  "some model joint and lie in the train split, where output error is not fitted (it is scored on "

@@ -3,11 +3,14 @@ model joint (tip coordinates, a few joint angles) are compared with the model si
 the recorded applied torques from rest at the recorded posture ``q0``.
 
 The simulated model is the rigid robot plus the torque-side terms fitted on the torque training
-sets (:mod:`._torque`), written as one effect of fixed structure (:class:`FittedTorques`): every
-candidate and every step of the forward selection then reuses one compiled solve. Terms that act
-on what a torque sensor or a motor encoder reads rather than on the motion (``sensor_delay``,
-``backlash``) and the spring structure fitted on FRF/modal data are left out of the simulation;
-see ``docs/case_format.md``.
+sets (:mod:`._torque`), written as one effect of fixed structure (:class:`FittedTorques`), plus
+the joint springs fitted on FRF/modal data (:class:`jflex.effects.FlexibleJoints`, reduced
+model): the applied torque drives the motor side of a flexible joint, which carries the joint's
+rotor inertia; the spring carries it to the link. Every candidate and every step of the forward
+selection with the same set of flexible joints reuses one compiled solve. Terms that act on what
+a torque sensor or a motor encoder reads rather than on the motion (``sensor_delay``,
+``backlash``) and the virtual springs (orthogonal and link compliance) are left out of the
+simulation; see ``docs/case_format.md``.
 """
 
 from __future__ import annotations
@@ -20,7 +23,9 @@ import numpy as np
 
 from .._model import Model
 from .._simulate import simulate
+from .._model import model_inverse_dynamics, initial_state
 from ..effects._base import AbstractEffect, Slots
+from ..effects import FlexibleJoints
 from .._inputs import Sampled
 from . import _torque as T
 
@@ -62,8 +67,14 @@ class FittedTorques(AbstractEffect):
         return jnp.zeros(slots.nx, dtype=x.dtype).at[:n].set(-tau)
 
 
-def simulation_model(robot, tfit) -> Model:
-    """The rigid robot plus the fitted torque terms (none when ``tfit`` is None)."""
+def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
+    """The rigid robot plus the fitted torque terms (none when ``tfit`` is None) plus the joint
+    springs ``{joint: (k, c)}`` [N m/rad, N m s/rad].
+
+    ``rotor`` (n,) [kg m^2] is rotor inertia added to the fitted one (the nominal values of a case
+    without torque training data). A spring's motor side carries the joint's rotor inertia and is
+    driven by the applied torque; a flexible joint without rotor inertia is left rigid (a massless
+    motor passes the applied torque through its spring unchanged)."""
     n = robot.nq
     p = {k: np.zeros(n) for k in ("viscous", "coulomb", "stribeck", "rotor")}
     vel = np.ones(n)
@@ -88,11 +99,37 @@ def simulation_model(robot, tfit) -> Model:
             comp[j] += th
         elif e == "payload":
             pay += th  # the regressor columns of the last link: its inertia parameters
+    if rotor is not None:
+        p["rotor"] += np.asarray(rotor, float)
+    flex = sorted(j for j in (springs or {}) if p["rotor"][j] > 0)
+    motor = np.array([p["rotor"][j] for j in flex])
+    for j in flex:
+        p["rotor"][j] = 0.0  # on the motor side of the spring
     inert = np.asarray(robot.inertia, float).copy()
     inert[n - 1] += pay
     eff = FittedTorques(*(jnp.asarray(p[k]) for k in ("viscous", "coulomb", "stribeck")), jnp.asarray(vel),
                         jnp.asarray(p["rotor"]), jnp.asarray(comp), jnp.asarray(T.EPS_SIGN))
-    return Model(robot.replace(inertia=jnp.asarray(inert)), [eff])
+    effects = [eff]
+    if flex:
+        kk = np.array([springs[j][0] for j in flex], float)
+        cc = np.array([springs[j][1] for j in flex], float)
+        effects.append(FlexibleJoints(jnp.asarray(kk), jnp.asarray(cc), jnp.asarray(motor), joints=flex, coupling=False))
+    return Model(robot.replace(inertia=jnp.asarray(inert)), effects)
+
+
+def rest_coords(model: Model, q0) -> np.ndarray:
+    """Coordinates of the model at rest at link posture ``q0``: each spring preloaded by the
+    static joint torque (gravity less the fitted compensators), ``theta = q0 + tau_static / k``."""
+    q0 = np.asarray(q0, float)
+    flex = [e for e in model.effects if isinstance(e, FlexibleJoints)]
+    if not flex:
+        return q0
+    fj = flex[0]
+    idx = list(fj.joints)
+    x = jnp.asarray(np.concatenate([q0, q0[idx]]))
+    z = jnp.zeros(x.shape[0])
+    tau = np.asarray(model_inverse_dynamics(model, 0.0, x, z, z, initial_state(model)))[: len(q0)]
+    return np.concatenate([q0, q0[idx] + tau[idx] / np.asarray(fj.stiffness)])
 
 
 @dataclasses.dataclass
@@ -140,7 +177,7 @@ def _solve(model, ts, x0, inputs, outputs):
 
 def predict(model: Model, s: ResponseSet) -> np.ndarray:
     """Simulated channels (N, k); NaN where the solve failed."""
-    out = _solve(model, jnp.asarray(s.t), jnp.asarray(s.q0), Sampled(s.t, s.tau), s.outputs)
+    out = _solve(model, jnp.asarray(s.t), jnp.asarray(rest_coords(model, s.q0)), Sampled(s.t, s.tau), s.outputs)
     cols = []
     for i, comp in s.picks:
         v = np.asarray(out[s.outputs[i]])
@@ -148,8 +185,11 @@ def predict(model: Model, s: ResponseSet) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def residual(model: Model, s: ResponseSet) -> tuple[np.ndarray, bool]:
-    """Normalised output error (N, k) and whether the solve succeeded everywhere."""
+def residual(model: Model, s: ResponseSet) -> tuple[np.ndarray, int]:
+    """Normalised output error (N, k) and the number of samples a failed solve left non-finite or
+    a diverged one put beyond ``FAILED_ERROR`` (1000 % of the channel's scale); their error is
+    capped there."""
     e = (predict(model, s) - s.y) / s.scale
-    ok = bool(np.all(np.isfinite(e)))
-    return np.nan_to_num(e, nan=FAILED_ERROR, posinf=FAILED_ERROR, neginf=-FAILED_ERROR), ok
+    bad = ~np.all(np.isfinite(e) & (np.abs(np.nan_to_num(e)) <= FAILED_ERROR), axis=1)
+    e = np.clip(np.nan_to_num(e, nan=FAILED_ERROR, posinf=FAILED_ERROR, neginf=-FAILED_ERROR), -FAILED_ERROR, FAILED_ERROR)
+    return e, int(bad.sum())
