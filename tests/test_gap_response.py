@@ -160,3 +160,16 @@ def test_failed_solves_are_recorded(tmp_path):
     f = r["failed_solves"]
     assert [(e["model"], e["dataset"]) for e in f] == [("nominal", "tip1")] and 0 < f[0]["samples"] <= f[0]["of"] == 300
     assert "Failed or diverged simulations" in markdown(r, [])
+    # the runaway residual is no noise: the floor comes from the record's own fourth difference
+    # and matches the planted tip noise (the residual's second difference would count the runaway)
+    d = next(d for d in load_case(folder).datasets if d.kind == "response")
+    s = R.response_set(load_case(folder).robot, d, "tool")
+    expected = np.sqrt(np.mean((TIP_NOISE / s.scale) ** 2)) * 100
+    assert r["noise_floor_source"] == {"tip1": "record fourth difference"}
+    assert 0.7 * expected < r["noise_floor"] < 1.3 * expected
+    # repeated records, when there are, set the floor
+    rng = np.random.default_rng(0)
+    _rewrite(folder, lambda z: z.update(y_repeats=z["y"][None] + 2 * TIP_NOISE * rng.standard_normal((4,) + z["y"].shape)))
+    r = diagnose(folder, max_effects=0, prune=0).result
+    assert r["noise_floor_source"] == {"tip1": "y_repeats"}
+    assert 1.6 * expected < r["noise_floor"] < 2.4 * expected

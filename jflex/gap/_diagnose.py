@@ -441,7 +441,7 @@ def _mean_of(rep, x) -> float:
     return 1.0
 
 
-def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
+def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = None) -> dict:
     """NRMSE [%] that noise alone leaves, per validation data set.
 
     Torque: from ``tau_repeats`` when recorded (over sqrt(R) when ``tau`` is their mean), else the robust (MAD) spread of the residual's
@@ -449,20 +449,28 @@ def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
     smooth model error barely enters, and the median ignores the few jumps at reversals).
     FRF: ``H_repeats`` when recorded (likewise), else the same on the real and imaginary parts of the
     residual along frequency. Modal tables: ``noise.modal_frequency_pct`` of the case (default 1).
+    Output-error (tip) sets: ``y_repeats`` when recorded, else per channel the smaller of the
+    residual's second-difference estimate and the record's own fourth difference,
+    ``MAD(d4 y) / sqrt(70)`` (a nominal simulation that drifts or runs away fast leaves
+    high-frequency content in the residual, not in the record; smooth motion barely enters d4).
+    ``sources``: optional mapping filled with the estimate used per data set.
     """
     out = {}
+    src = {} if sources is None else sources
     by_name = {d.name: d for d in case.datasets}
     for name, r in ev.items():
         d = by_name[name]
         if r["kind"] == "torque":
             s = next(s for s in problem.tval if s.name == name)
             if "tau_repeats" in d.arrays:
+                src[name] = "propagated angle noise" if d.kind == "response" else "tau_repeats"
                 rep = d.arrays["tau_repeats"]
                 sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale / _mean_of(rep, d.arrays["tau"])
             else:
                 e = r["resid"]
                 d2 = e[2:] - 2 * e[1:-1] + e[:-2]
                 sig = np.array([_mad_sigma(d2[:, j]) / np.sqrt(6) for j in range(e.shape[1])])
+                src[name] = "residual second difference"
             out[name] = float(np.sqrt(np.mean(sig**2)) * 100)
         elif r["kind"] == "response":
             # output error: white measurement noise on y, the same estimates on the residual
@@ -470,10 +478,17 @@ def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
             if "y_repeats" in d.arrays:
                 rep = d.arrays["y_repeats"]
                 sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale / _mean_of(rep, d.arrays["y"])
+                src[name] = "y_repeats"
             else:
                 e = r["resid"]
                 d2 = e[2:] - 2 * e[1:-1] + e[:-2]
-                sig = np.array([_mad_sigma(d2[:, j]) / np.sqrt(6) for j in range(e.shape[1])])
+                s2 = np.array([_mad_sigma(d2[:, j]) / np.sqrt(6) for j in range(e.shape[1])])
+                y = s.y / s.scale
+                d4 = y[4:] - 4 * y[3:-1] + 6 * y[2:-2] - 4 * y[1:-3] + y[:-4]
+                s4 = np.array([_mad_sigma(d4[:, j]) / np.sqrt(70) for j in range(y.shape[1])])
+                sig = np.minimum(s2, s4)
+                src[name] = ("residual second difference" if np.sum(s2**2) <= np.sum(s4**2) else
+                             "record fourth difference")
             out[name] = float(np.sqrt(np.mean(sig**2)) * 100)
         elif r["kind"] == "frf":
             a = d.arrays
@@ -486,13 +501,16 @@ def noise_floor(problem: Problem, ev: dict, case: Case) -> dict:
                 var = np.sum(np.abs(rep - rep.mean(axis=0)) ** 2, axis=0) / max(rep.shape[0] - 1, 1)
                 var = var / _mean_of(rep, a["H"]) ** 2
                 out[name] = float(np.sqrt(np.sum(var[:, ok]) / np.sum(np.abs(a["H"][:, ok]) ** 2)) * 100)
+                src[name] = "H_repeats"
             else:
+                src[name] = "residual second difference"
                 e = r["err"][:, ok] / scale[ok]
                 d2 = e[2:] - 2 * e[1:-1] + e[:-2]
                 sig = np.sqrt(_mad_sigma(d2.real) ** 2 + _mad_sigma(d2.imag) ** 2) / np.sqrt(6)
                 out[name] = float(sig * 100)
         else:
             out[name] = float(case.noise.get("modal_frequency_pct", 1.0))
+            src[name] = "noise.modal_frequency_pct" if "modal_frequency_pct" in case.noise else "default 1 %"
     return out
 
 
@@ -844,7 +862,8 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     say(f"nominal fit ({len(pb.ttrain)} torque, {len(pb.ftrain)} frf/modal training sets)")
     nom = pb.nominal_state()
     ev0 = pb.evaluate(nom)
-    floor = noise_floor(pb, ev0, case)
+    floor_source = {}
+    floor = noise_floor(pb, ev0, case, floor_source)
     gap0, fl, exc0 = _combine(ev0, floor)
     significant = _significant(ev0, floor)
     cands = pb.candidates()
@@ -904,7 +923,7 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     wh = where(pb, ev0, floor, case)
     result = dict(
         case=str(case.path), gap_before=gap0, gap_after=gap_after, noise_floor=fl,
-        noise_floor_per_dataset=floor, excess_before=exc0, excess_after=exc_after,
+        noise_floor_per_dataset=floor, noise_floor_source=floor_source, excess_before=exc0, excess_after=exc_after,
         shrink=float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0,
         significant=bool(significant), remaining_significant=bool(_significant(ev_cur, floor)),
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
