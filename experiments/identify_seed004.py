@@ -231,12 +231,17 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         # from the previous minimum (over 3 s the amplitude-dependent frequency of the decayed
         # motion puts a side minimum every cycle of phase error).
         windows = [float(T) for T in (cfg.get("stages_s", {}) or {}).get(name, [])] + [None]
+        last = (cfg.get("final_tolerances", {}) or {}).get(name)
         for k, T in enumerate(windows):
             d = data if T is None else _window(data, T)
+            if T is None and last:  # the last stage at a tighter solve: its cost is smooth at the scale of one std
+                d = idf.TimeData(d.ts, dict(d.measured), x0=np.asarray(d.x0s)[0], name=d.name,
+                                 simulate_kw={**dict(d.simulate_kw), **{q: float(v) for q, v in last.items()}})
             res = idf.fit(model, idf.ParameterSpec(frees), d, lm, max_steps=int(cfg["max_steps"]), progress=1,
                           multistart=multi if k == 0 else None, stall=cfg.get("stall"))
             model = res.model
             stages.append({"record_s": T if T is not None else float(cfg["t_end_s"]), "steps": res.steps, "result": res.result,
+                           "tolerances": {q: dict(d.simulate_kw).get(q) for q in ("rtol", "atol")},
                            "seconds": res.seconds, "values": {q: np.asarray(v).item() for q, v in res.values.items()},
                            "multistart": res.multistart})
         wall = time.perf_counter() - t0
