@@ -102,7 +102,9 @@ def frf_sweep(
     _tune_allocator_once()
     N = Q.shape[0]
     block = min(block_size, N)
-    chunk = max(block, min(chunk_size, N) // block * block)  # whole blocks per chunk
+    # equal chunks of whole blocks: the last chunk's padding stays under one block per chunk
+    n_chunks = -(-N // max(block, chunk_size // block * block))
+    chunk = -(-(-(-N // n_chunks)) // block) * block
     hold = hold if isinstance(hold, str) else tuple(hold)
     kw = (("hold", hold), ("frame", frame), ("reference", reference), ("components", components), ("solver", solver))
     if method == "modal":
