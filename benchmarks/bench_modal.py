@@ -128,6 +128,7 @@ print(f"jax {jax.__version__}, devices {jax.devices()}, jflex.tune_allocator(): 
 
 # ---- 1. modal analysis ----------------------------------------------------------------------
 N = args.modal_n
+chunk = min(args.chunk, N)  # a run with fewer postures than a chunk times one chunk
 Q = rng.uniform(lo, hi, (N, 3))
 Qj = jax.numpy.asarray(Q)  # postures on the device once (numpy slices per call cost jit ~25 us per posture here)
 nb = N if args.baseline_n == 0 else min(N, args.baseline_n)
@@ -139,18 +140,18 @@ for solver in ("newton", "eig") if args.with_eig else ("newton",):
     fn = lambda q, solver=solver: jflex.modal_analysis(model, q, hold="actuated", solver=solver)
     t0 = time.perf_counter()
     vfn = jax.jit(jax.vmap(fn))
-    _ = jax.block_until_ready(vfn(Q[: args.chunk]).frequency)
+    _ = jax.block_until_ready(vfn(Q[:chunk]).frequency)
     t_compile = time.perf_counter() - t0
 
     def jflex_modal():
-        out = [vfn(Qj[s : s + args.chunk]) for s in range(0, N - N % args.chunk, args.chunk)]
+        out = [vfn(Qj[s : s + chunk]) for s in range(0, N - N % chunk, chunk)]
         return [o.frequency for o in out]
 
     _, t_j = timed(jflex_modal)
-    n_j = N - N % args.chunk
+    n_j = N - N % chunk
     # the whole N through jflex.sweep: chunked, progress, host copies, its own compile included
     res = {}
-    _, t_sweep = timed(lambda: res.setdefault("f", jflex.sweep(fn, Q, chunk_size=args.chunk, progress=True,
+    _, t_sweep = timed(lambda: res.setdefault("f", jflex.sweep(fn, Q, chunk_size=chunk, progress=True,
                                                                label=f"jflex.sweep modal ({solver})").frequency))
     f_j = res["f"][:nb]
     err = np.max(np.abs(f_j - f_ref) / f_ref)
