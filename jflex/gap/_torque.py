@@ -93,18 +93,37 @@ def torque_set(robot, ds) -> TorqueSet:
                      np.maximum(a["tau"].std(axis=0), 1e-9), Ypay, np.asarray(J), a["q_extra"], ds.extra_joints, robot)
 
 
-def backlash_torque(s: TorqueSet, j: int, b: float) -> np.ndarray:
-    """Rigid torque change (N, n) when the link of joint ``j`` follows the measured (motor-side)
-    angle through a play of half-width ``b``; engagement smoothed by a zero-phase first-order
-    filter (8 ms)."""
-    key = ("backlash", j, b)
+BACKLASH_ENGAGE = (0.004, 0.008, 0.012)  # [s] grid of engagement smoothing (contact compliance) time constants
+BACKLASH_PULSES = (0.004, 0.008, 0.016, 0.032)  # [s] widths of the engagement-impulse basis
+
+
+def backlash_hyper(h):
+    """``(b, engagement time constant)`` from a term's hyper-parameter (a bare ``b`` takes 8 ms)."""
+    return (float(h), 0.008) if np.ndim(h) == 0 else (float(h[0]), float(h[1]))
+
+
+def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
+    """Rigid torque change columns (N, n, 1 + len(BACKLASH_PULSES)) when the link of joint ``j``
+    follows the measured (motor-side) angle through a play of half-width ``b``, ``h = (b, tau_e)``.
+
+    Column 0: the link's posture and velocity (play output, engagement smoothed by a zero-phase
+    first-order filter of time constant ``tau_e``) with the measured acceleration. Columns 1..:
+    the engagement impulse, ``M(q_link)[:, j]`` times the link's extra acceleration, its velocity
+    smoothed over each width of :data:`BACKLASH_PULSES`: the contact's stiffness and damping (how
+    hard the teeth meet) set the impulse's shape, unknown, so it is a non-negative mixture."""
+    b, tau_e = backlash_hyper(h)
+    key = ("backlash", j, b, tau_e)
     if key not in s.cache:
-        ql, qdl, qddl = s.q.copy(), s.qd.copy(), s.qdd.copy()
-        ql[:, j] = zero_phase_lowpass(play(s.q[:, j], b), s.t, 0.008)
+        ql, qdl = s.q.copy(), s.qd.copy()
+        ql[:, j] = zero_phase_lowpass(play(s.q[:, j], b), s.t, tau_e)
         qdl[:, j] = np.gradient(ql[:, j], s.t)
-        qddl[:, j] = np.gradient(qdl[:, j], s.t)
-        F = np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qddl)))
-        s.cache[key] = F - s.F0
+        Fa = np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(s.qdd)))
+        cols = [Fa - s.F0]
+        for w in BACKLASH_PULSES:
+            qdd = s.qdd.copy()
+            qdd[:, j] = np.gradient(zero_phase_lowpass(qdl[:, j], s.t, w), s.t)
+            cols.append(np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qdd))) - Fa)
+        s.cache[key] = np.stack(cols, axis=2)
     return s.cache[key]
 
 
@@ -137,11 +156,12 @@ class Term:
 
     effect: str
     joint: int | None
-    hyper: float | None = None  # Stribeck velocity [rad/s] or delay [s]
+    hyper: float | tuple | None = None  # Stribeck velocity [rad/s], delay [s] or backlash (b [rad], engagement [s])
 
     @property
     def n_params(self) -> int:
-        return {"stribeck_friction": 2, "gravity_compensator": 4, "payload": 10, "sensor_delay": 0}.get(self.effect, 1)
+        return {"stribeck_friction": 2, "gravity_compensator": 4, "payload": 10, "sensor_delay": 0,
+                "backlash": 1 + len(BACKLASH_PULSES)}.get(self.effect, 1)
 
     def bounds(self):
         lo = {"gravity_compensator": [-np.inf] * 4, "payload": [0.0] + [-np.inf] * 9}.get(
@@ -155,7 +175,7 @@ class Term:
             "gravity_compensator": ["B_cos1 [N m]", "B_sin1 [N m]", "B_cos2 [N m]", "B_sin2 [N m]"],
             "payload": ["m [kg]", "m cx [kg m]", "m cy [kg m]", "m cz [kg m]", "Ixx [kg m^2]", "Ixy [kg m^2]",
                         "Iyy [kg m^2]", "Ixz [kg m^2]", "Iyz [kg m^2]", "Izz [kg m^2]"],
-            "backlash": ["engagement (1 = full play)"],
+            "backlash": ["engagement (1 = full play)"] + [f"impulse {w * 1e3:g} ms" for w in BACKLASH_PULSES],
             "sensor_delay": [],
         }[self.effect]
 
@@ -182,8 +202,8 @@ class Term:
         elif e == "payload":
             out[:] = s.Ypay
         elif e == "backlash":
-            # motor-side encoder; the link follows through the play (half-width = hyper)
-            out[:, :, 0] = backlash_torque(s, j, self.hyper)
+            # motor-side encoder; the link follows through the play (hyper = (half-width, engagement))
+            out[:, :, :] = backlash_torque(s, j, self.hyper)
         return out
 
     def label(self, joint_names) -> str:
@@ -241,7 +261,19 @@ def fit_with(base_terms, base_delay, new: Term | None, sets) -> TorqueFit:
         fits = [fit_terms(base_terms, d, sets) for d in DELAYS]
         best = min(fits, key=lambda f: f.cost)
         return TorqueFit(best.terms + (Term("sensor_delay", None, best.delay),), best.delay, best.theta, best.cost)
-    grid = {"stribeck_friction": STRIBECK_VS, "backlash": BACKLASH_B}.get(new.effect)
+    if new.effect == "backlash":
+        # play half-width on a grid (engagement 8 ms), the engagement time on its grid, then the
+        # half-width refined around the best
+        fit = lambda h: fit_terms(tuple(base_terms) + (Term("backlash", new.joint, h),), base_delay, sets)
+        best = min((fit((b, 0.008)) for b in BACKLASH_B), key=lambda f: f.cost)
+        b = best.terms[-1].hyper[0]
+        best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != 0.008], key=lambda f: f.cost)
+        te = best.terms[-1].hyper[1]
+        for step in (0.00125, 0.000625):
+            best = min([best] + [fit((b + d, te)) for d in (-step, step) if b + d > 0], key=lambda f: f.cost)
+            b = best.terms[-1].hyper[0]
+        return best
+    grid = {"stribeck_friction": STRIBECK_VS}.get(new.effect)
     if grid is not None:
         fits = [fit_terms(tuple(base_terms) + (Term(new.effect, new.joint, v),), base_delay, sets) for v in grid]
         return min(fits, key=lambda f: f.cost)
@@ -259,7 +291,8 @@ def term_parameters(fit: TorqueFit, joint_names) -> dict:
         if t.effect == "sensor_delay":
             d["delay [s]"] = float(t.hyper)
         if t.effect == "backlash":
-            d["b [rad]"] = float(t.hyper)
+            b, te = backlash_hyper(t.hyper)
+            d["b [rad]"], d["engagement [s]"] = b, te
         out[t.label(joint_names)] = d
         k += len(names)
     return out
