@@ -191,7 +191,8 @@ class Problem:
         st = lm.structure
         S = len(st.springs)
         ks, cs = list(x[:S]), list(x[S:2 * S])
-        pay = list(x[2 * S:]) if st.payload else []
+        pay = list(x[2 * S:2 * S + 1]) if st.payload else []
+        cpl = list(x[2 * S + len(pay):])  # couplings of virtual pairs already in the model
         springs = list(st.springs)
         new_idx = []
         if cand.effect in ("hysteretic_damping", "fractional_damping"):
@@ -241,15 +242,16 @@ class Problem:
         if cand.effect == "payload":
             st2 = L.LinearStructure(tuple(springs), True)
             lm2 = L.LinearModel(self.robot, st2, self.case.tool_frame)
-            xs = [np.concatenate([ks, cs, [np.log(m)]]) for m in (0.1, 1.0, 10.0)]
+            xs = [np.concatenate([ks, cs, [np.log(m)], cpl]) for m in (0.1, 1.0, 10.0)]
             xf, _ = L.fit_linear(lm2, xs[0], self.ftrain, starts=xs[1:])
             return lm2, xf
         if cand.effect == "joint_flexibility":
             new = [L.Spring("joint", cand.joint)]
         elif cand.effect == "orthogonal_compliance":
-            new = [L.Spring("orth", cand.joint, 0), L.Spring("orth", cand.joint, 1)]
+            # a bearing's tilt stiffness: a full 2x2 (coupled) stiffness about the two axes
+            new = [L.Spring("orth", cand.joint, 0), L.Spring("orth", cand.joint, 1, coupled=True)]
         else:
-            new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1)]
+            new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1, coupled=True)]
         sp = springs + new
         lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
         # starting stiffnesses: the new spring(s) alone would put a mode at f_t; f_t is scanned over a
@@ -266,7 +268,7 @@ class Problem:
         def start(fts):
             nk = [np.log((2 * np.pi * ft) ** 2 * m) for ft, m in zip(fts, meff)]
             nc = [np.log(2 * 0.02 * np.sqrt(np.exp(k) * m)) for k, m in zip(nk, meff)]
-            return np.concatenate([ks, nk, cs, nc, pay])
+            return np.concatenate([ks, nk, cs, nc, pay, cpl, np.zeros(len(new) - 1)])
 
         grid = [[ft] * len(new) for ft in targets]
         if len(new) == 2:
@@ -290,19 +292,26 @@ class Problem:
                     k = scale * (2 * np.pi * ft) ** 2 * me * (1.0 + 0.5 * s)
                     nk.append(np.log(k))
                     nc.append(np.log(2 * 0.02 * np.sqrt(k * me)))
-                starts.append(np.concatenate([ks, nk, cs, nc, pay]))
+                starts.append(np.concatenate([ks, nk, cs, nc, pay, cpl, np.zeros(len(new) - 1)]))
         # from each start: first the new stiffness(es) alone, the nominal springs and the new
         # damping held (freed here, the damping of a misplaced new mode ran to zero, hiding the
         # mode between the fitted frequencies); then everything
         Sn = len(sp)
         free = np.zeros(len(starts[0]), bool)
         free[S:Sn] = True
+        # a new pair's coupling is held at zero from every start and freed once, from the best
+        # (the uncoupled fit puts the pair's modes in place; the coupling then turns its axes)
+        nc_new = len(starts[0]) - 2 * Sn - len(pay) - len(cpl)
+        held = np.ones(len(starts[0]), bool)
+        held[len(held) - nc_new:] = False
         best = None
         for x0 in starts:
             x1, _ = L.fit_linear(lm2, x0, self.ftrain, free=free)
-            xf, cost = L.fit_linear(lm2, x1, self.ftrain, peaks_first=False)
+            xf, cost = L.fit_linear(lm2, x1, self.ftrain, free=held, peaks_first=False)
             if best is None or cost < best[0]:
                 best = (cost, xf)
+        if nc_new:
+            best = L.fit_linear(lm2, best[1], self.ftrain, peaks_first=False)[::-1]
         return lm2, best[1]
 
     def _ref_posture(self):
@@ -661,7 +670,8 @@ def step_record(added, ev, floor) -> dict:
 
 def _n_params(c: Candidate) -> int:
     return {"stribeck_friction": 3, "gravity_compensator": 4, "payload": 10, "orthogonal_compliance": 4,
-            "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2}.get(c.effect, 1)
+            "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2,
+            "backlash": 1 + len(T.BACKLASH_PULSES)}.get(c.effect, 1)
 
 
 # --- signatures -----------------------------------------------------------------------------------
@@ -961,5 +971,8 @@ def _parameters(pb: Problem, st: State) -> dict:
                         "fractional": f"c [N m s^{s.alpha}/rad]"}[s.law]: float(np.exp(st.x[S + i]))}
         if st.lm.structure.payload:
             lin["payload"] = {"mass [kg]": float(np.exp(st.x[2 * S]))}
+        for (a, b), r in zip(st.lm.pairs, st.lm.coupling(st.x)):
+            nm = {"orth": f"{pb.names[sp[b].where]}_orth", "link": f"{pb.robot.link_names[sp[b].where]}_bend"}[sp[b].kind]
+            lin[nm + "_coupling"] = {"r = k_ab / sqrt(k_a k_b)": float(r)}
         out["linear"] = lin
     return out

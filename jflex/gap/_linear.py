@@ -8,6 +8,9 @@ motor) and the virtual joints that candidates insert into the kinematic tree:
   the two axes perpendicular to its rotation axis, each with a spring (bearing tilt);
 - ``link_flexibility`` of link i: two virtual bending hinges at mid-span of link i, about the
   axes perpendicular to the link (its first bending mode, lumped);
+- a virtual pair's two springs may be coupled (``Spring.coupled`` on its axis-1 spring): a full
+  symmetric positive-definite 2x2 stiffness ``[[k_a, r sqrt(k_a k_b)], [r sqrt(k_a k_b), k_b]]``,
+  ``r = tanh(x_r)`` in (-1, 1) (the principal axes need not be the ones :func:`_perp` picks);
 - ``joint_flexibility`` at joint j: a torsion spring at a joint the nominal model holds rigid;
 - ``payload``: a point mass at the tool frame.
 
@@ -50,6 +53,7 @@ class Spring:
     law: str = "viscous"
     alpha: float = 0.5
     frac: float = 0.5  # link hinges: position along the link (0 root, 1 tip)
+    coupled: bool = False  # axis 1 of a virtual pair: a stiffness coupling with its axis-0 partner
 
 
 def _perp(a):
@@ -167,8 +171,17 @@ class LinearStructure:
     springs: tuple
     payload: bool = False
 
+    def pairs(self) -> list:
+        """``[(a, b)]`` spring indices of the coupled virtual pairs (``b`` the coupled axis-1 spring)."""
+        out = []
+        for b, s in enumerate(self.springs):
+            if s.coupled:
+                a = next(i for i, t in enumerate(self.springs) if (t.kind, t.where, t.axis) == (s.kind, s.where, 0))
+                out.append((a, b))
+        return out
+
     def n_params(self) -> int:
-        return 2 * len(self.springs) + int(self.payload)
+        return 2 * len(self.springs) + int(self.payload) + len(self.pairs())
 
 
 def _quiet(fn):
@@ -186,11 +199,12 @@ def _quiet(fn):
 
 class LinearModel:
     """Evaluates FRFs and modes of a :class:`LinearStructure` at postures, parameters in log form:
-    ``[log k_s, log c_s (or eta_s) for each spring, log m_payload]``."""
+    ``[log k_s, log c_s (or eta_s) for each spring, log m_payload, atanh r of each coupled pair]``."""
 
     def __init__(self, robot, structure: LinearStructure, tool_frame):
         self.robot, self.structure, self.tool = robot, structure, tool_frame
         self.aug, self.coord, self.model_index = augment(robot, structure.springs)
+        self.pairs = structure.pairs()
         self._cache = {}
 
     def mats(self, q0) -> PostureMats:
@@ -230,6 +244,11 @@ class LinearModel:
         m = np.exp(x[2 * S]) if self.structure.payload else 0.0
         return k, c, m
 
+    def coupling(self, x):
+        """``r`` (in (-1, 1)) of each coupled pair."""
+        o = 2 * len(self.structure.springs) + int(self.structure.payload)
+        return np.tanh(np.asarray(x, float)[o:o + len(self.pairs)])
+
     def stiffness(self, x, P: PostureMats, omega):
         """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,)."""
         k, c, m = self._split(x)
@@ -245,6 +264,9 @@ class LinearModel:
             else:
                 d[:, i] = k[i] + c[i] * (1j * w[:, 0]) ** s.alpha
         D = Kg[None] - w[:, :, None] ** 2 * M[None] + d[:, :, None] * np.eye(len(k))[None]
+        for (a, b), r in zip(self.pairs, self.coupling(x)):
+            D[:, a, b] += r * np.sqrt(k[a] * k[b])
+            D[:, b, a] += r * np.sqrt(k[a] * k[b])
         return D, M
 
     @_quiet
