@@ -228,15 +228,25 @@ class Problem:
             else:
                 for a in L.ALPHAS:
                     fit_alpha(a)
-                # refine the order: the vertex of a parabola through the best grid point and its neighbours
+                # refine the order: steps of 0.1, 0.05 and 0.025 either side of the best order tried,
+                # then the vertex of a parabola through the best and its (now close) neighbours (one
+                # parabola through the wide grid stopped 0.07 off the order)
+                best_a = lambda: min(tried, key=lambda a: tried[a][0])
+                for h in (0.1, 0.05, 0.025):
+                    a0 = best_a()
+                    for a_new in (a0 - h, a0 + h):
+                        a_new = round(float(np.clip(a_new, 0.1, 0.95)), 3)
+                        if a_new not in tried:
+                            fit_alpha(a_new)
                 al = sorted(tried)
-                kb = int(np.argmin([tried[a][0] for a in al]))
-                kb = min(max(kb, 1), len(al) - 2)
+                kb = min(max(al.index(best_a()), 1), len(al) - 2)
                 xa = np.array(al[kb - 1:kb + 2])
                 ya = np.log(np.array([tried[a][0] for a in xa]))
-                cpar = np.polyfit(xa, ya, 2)
+                cpar = np.polyfit(xa - xa[1], ya, 2)
                 if cpar[0] > 0:
-                    fit_alpha(float(np.clip(-cpar[1] / (2 * cpar[0]), 0.1, 0.95)))
+                    a_new = round(float(np.clip(xa[1] - cpar[1] / (2 * cpar[0]), xa[0], xa[2])), 3)
+                    if a_new not in tried:
+                        fit_alpha(a_new)
             cost, lm2, xf = min(tried.values(), key=lambda t: t[0])
             return lm2, xf
         if cand.effect == "payload":
