@@ -232,6 +232,45 @@ def test_linear_model_equals_linearize_of_flexible_joint_model(rotor_case):
     np.testing.assert_allclose(H, np.asarray(Hj), rtol=1e-8, atol=1e-14)
 
 
+def test_coupled_virtual_pair_equals_full_spd_stiffness(rotor_case):
+    """A coupled orthogonal pair is the full 2x2 stiffness [[ka, r sqrt(ka kb)], [., kb]] (r = tanh x_r)."""
+    c = load_case(rotor_case)
+    joint = [L.Spring("joint", j) for j in range(3)]
+    pair = [L.Spring("orth", 0, 0), L.Spring("orth", 0, 1, coupled=True)]
+    st = L.LinearStructure(tuple(joint + pair))
+    assert st.pairs() == [(3, 4)] and st.n_params() == 11
+    lm = L.LinearModel(c.robot, st, "tool")
+    k = np.array([3e4, 5e4, 2e4, 4e5, 2e4])
+    cc = 1e-3 * k
+    r = 0.3
+    q0 = np.array([0.3, 0.8, -1.1])
+    freq = np.array([5.0, 20.0, 40.0])
+    H = lm.frf(np.r_[np.log(k), np.log(cc), np.arctanh(r)], q0, freq)
+    K = np.diag(k)
+    K[3, 4] = K[4, 3] = r * np.sqrt(k[3] * k[4])
+    Ht = G.frf_truth(c.robot, "tool", joint + pair, K, [["viscous", v, 0.5] for v in cc], q0, freq)
+    np.testing.assert_allclose(H, Ht, rtol=1e-8, atol=1e-14)
+    # with r = 0 it is the uncoupled pair
+    H0 = lm.frf(np.r_[np.log(k), np.log(cc), 0.0], q0, freq)
+    H1 = L.LinearModel(c.robot, L.LinearStructure(tuple(joint + pair[:1] + [L.Spring("orth", 0, 1)])), "tool").frf(
+        np.r_[np.log(k), np.log(cc)], q0, freq)
+    np.testing.assert_allclose(H0, H1, rtol=1e-12)
+
+
+def test_backlash_columns_split_posture_and_engagement_impulse(rotor_case):
+    """The backlash term: a posture/velocity column plus one engagement-impulse column per pulse
+    width; its fit searches (half-width, engagement time) and keeps every coefficient non-negative."""
+    c = load_case(rotor_case)
+    s = T.torque_set(c.robot, c.split("train")[0])
+    cols = T.Term("backlash", 1, (0.01, 0.008)).columns(s)
+    assert cols.shape == s.q.shape + (1 + len(T.BACKLASH_PULSES),)
+    assert np.all(np.isfinite(cols)) and np.abs(cols[:, :, 0]).max() > 0
+    fit = T.fit_with((), 0.0, T.Term("backlash", 1), [s])
+    b, te = T.backlash_hyper(fit.terms[-1].hyper)
+    assert te in T.BACKLASH_ENGAGE and 0 < b <= max(T.BACKLASH_B) + 0.002 and np.all(fit.theta >= 0)
+    assert "engagement [s]" in T.term_parameters(fit, c.robot.joint_names)[f"backlash@{c.robot.joint_names[1]}"]
+
+
 def test_cli_diagnose_writes_run_folder(rotor_case, tmp_path):
     from jflex.cli import main
 
