@@ -169,8 +169,7 @@ def _frequency_dependent(model: Model, x0):
     return [e for e, s in zip(model.effects, lay.slots) if e.dynamic_stiffness(r, s, x0, 1.0) is not None]
 
 
-def _require_viscous(model: Model, x0, what: str):
-    extras = _frequency_dependent(model, x0)
+def _require_viscous(extras, what: str):
     if extras:
         names = sorted({type(e).__name__ for e in extras})
         raise ParameterError(
@@ -196,7 +195,7 @@ def pole_residue(
     """
     check_solver(solver)
     x0, lin = linearization(model, posture, hold)
-    _require_viscous(model, x0, "pole_residue")
+    _require_viscous(_frequency_dependent(model, x0), "pole_residue")
     T = None if frame is None else tool_jacobian(model, x0, lin.keep, frame, reference, components)
     return pole_residue_matrices(lin.M, lin.C, lin.K, T=T, solver=solver)
 
@@ -249,10 +248,11 @@ def frf(
     T = None if frame is None else tool_jacobian(model, x0, lin.keep, frame, reference, components)
     r, lay = model.rigid, model.layout
     idx = jnp.array(lin.keep, dtype=int)
-    if not _frequency_dependent(model, x0):
+    extras = _frequency_dependent(model, x0)
+    if not extras:
         return frf_matrices(lin.M, lin.C, lin.K, omega, kind=kind, method=method, T=T, solver=solver)
     if method == "modal":
-        _require_viscous(model, x0, "frf: method='modal'")
+        _require_viscous(extras, "frf: method='modal'")
 
     def one(w):
         D = lin.K - w**2 * lin.M + 1j * w * lin.C
