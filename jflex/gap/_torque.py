@@ -94,12 +94,13 @@ def torque_set(robot, ds) -> TorqueSet:
 
 
 BACKLASH_ENGAGE = (0.004, 0.008, 0.012)  # [s] grid of engagement smoothing (contact compliance) time constants
+BACKLASH_ENGAGE_FIRST = 0.008  # [s] the engagement time of the half-width grid search (and of a bare b)
 BACKLASH_PULSES = (0.004, 0.008, 0.016, 0.032)  # [s] widths of the engagement-impulse basis
 
 
 def backlash_hyper(h):
     """``(b, engagement time constant)`` from a term's hyper-parameter (a bare ``b`` takes 8 ms)."""
-    return (float(h), 0.008) if np.ndim(h) == 0 else (float(h[0]), float(h[1]))
+    return (float(h), BACKLASH_ENGAGE_FIRST) if np.ndim(h) == 0 else (float(h[0]), float(h[1]))
 
 
 def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
@@ -262,12 +263,12 @@ def fit_with(base_terms, base_delay, new: Term | None, sets) -> TorqueFit:
         best = min(fits, key=lambda f: f.cost)
         return TorqueFit(best.terms + (Term("sensor_delay", None, best.delay),), best.delay, best.theta, best.cost)
     if new.effect == "backlash":
-        # play half-width on a grid (engagement 8 ms), the engagement time on its grid, then the
+        # play half-width on a grid (engagement BACKLASH_ENGAGE_FIRST), the engagement time on its grid, then the
         # half-width refined around the best
         fit = lambda h: fit_terms(tuple(base_terms) + (Term("backlash", new.joint, h),), base_delay, sets)
-        best = min((fit((b, 0.008)) for b in BACKLASH_B), key=lambda f: f.cost)
+        best = min((fit((b, BACKLASH_ENGAGE_FIRST)) for b in BACKLASH_B), key=lambda f: f.cost)
         b = best.terms[-1].hyper[0]
-        best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != 0.008], key=lambda f: f.cost)
+        best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != BACKLASH_ENGAGE_FIRST], key=lambda f: f.cost)
         te = best.terms[-1].hyper[1]
         for step in (0.00125, 0.000625):
             best = min([best] + [fit((b + d, te)) for d in (-step, step) if b + d > 0], key=lambda f: f.cost)
