@@ -40,7 +40,9 @@ def test_planted_effect_found_and_parameter_recovered(rotor_case):
     assert [(s["effect"], s["joint"]) for s in r["selected"]][:1] == [("rotor_inertia", truth["joint"])]
     got = r["parameters"]["torque"][f"rotor_inertia@{truth['joint']}"]["Ia [kg m^2]"]
     assert abs(got - truth["params"]["Ia"]) < RTOL_PARAM * truth["params"]["Ia"]
-    assert r["shrink"] > 80
+    # the nominal identification already takes up the part of Ia that link 1's CAD tolerance
+    # allows (Ia of a vertical first joint adds to link 1's Izz): the shrink is of what is left
+    assert r["shrink"] > 70 and r["gap_after"] < 1.7 * r["noise_floor"]
     for key in ("gap_before", "gap_after", "noise_floor", "significant", "where", "ranking", "selected"):
         assert key in r
     assert r["where"][0]["dataset"] == "traj2" and r["where"][0]["nrmse"] >= r["where"][-1]["nrmse"]
@@ -153,7 +155,9 @@ def test_response_validation_set_finds_planted_effect(tmp_path):
     assert [(s["effect"], s["joint"]) for s in r["selected"]][:1] == [("rotor_inertia", truth["joint"])]
     got = r["parameters"]["torque"][f"rotor_inertia@{truth['joint']}"]["Ia [kg m^2]"]
     assert abs(got - truth["params"]["Ia"]) < RTOL_PARAM * truth["params"]["Ia"]
-    assert r["shrink"] > 80
+    # the nominal identification already takes up the part of Ia that link 1's CAD tolerance
+    # allows (Ia of a vertical first joint adds to link 1's Izz): the shrink is of what is left
+    assert r["shrink"] > 70 and r["gap_after"] < 1.7 * r["noise_floor"]
 
 
 def test_response_null_case_is_within_its_propagated_noise_floor(tmp_path):

@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from ._case import Case, load_case
+from ._inertia import inertia_prior, link_moves
 from . import _linear as L
 from . import _response as R
 from . import _torque as T
@@ -37,6 +38,10 @@ CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("pay
 SIGNIFICANCE = 1.2  # a gap is significant when nrmse > 1.2 x its noise floor (+ MIN_GAP)
 MIN_GAP = 0.2  # [%] below this a gap is never significant
 MIN_STEP_SHRINK = 10.0  # [%] of the current excess an added effect must close to be selected
+MIN_NAMED_SHRINK = 50.0  # [%] of the nominal excess the first effect must close to be named at all
+EXPLAINED_SHRINK = 80.0  # [%] of the nominal excess closed in all for the verdict 'explained'
+DEFAULT_OPTIONS = {"inertia_prior": 1.0, "refit_inertia": True, "filter_cutoff_hz": "auto", "decimate": 1,
+                   "max_effects": 3}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,8 +83,14 @@ class Problem:
         self.names = tuple(self.robot.joint_names)
         self.n = self.robot.nq
         # responses whose channels hold every model joint enter as equation-error (torque) sets
-        self.ttrain = [T.torque_set(self.robot, d) for d in case.split("train") if _is_torque(d)]
-        self.tval = [T.torque_set(self.robot, d) for d in case.split("validation") if _is_torque(d)]
+        self.options = dict(DEFAULT_OPTIONS, **(getattr(case, "options", None) or {}))
+        proc = dict(cutoff_hz=self.options["filter_cutoff_hz"], decimate=int(self.options["decimate"]))
+        self.ttrain = [T.torque_set(self.robot, d, **proc) for d in case.split("train") if _is_torque(d)]
+        self.tval = [T.torque_set(self.robot, d, **proc) for d in case.split("validation") if _is_torque(d)]
+        # the nominal identification refits the CAD inertial parameters (prior toward CAD, within
+        # its tolerance) unless the case holds them fixed
+        self.inertia = (inertia_prior(self.robot, float(self.options["inertia_prior"]))
+                        if self.ttrain and self.options["refit_inertia"] else None)
         self.ftrain = [d for d in case.datasets if d.split == "train" and d.kind in ("frf", "modal")]
         self.fval = [d for d in case.datasets if d.split == "validation" and d.kind in ("frf", "modal")]
         # the others are simulated under their applied torques and compared as output error, on
@@ -109,7 +120,13 @@ class Problem:
             elif e["effect"] == "sensor_delay":
                 delay = float(e.get("value", [0.0])[0])
                 terms.append(T.Term("sensor_delay", None, delay))
-        tfit = T.fit_terms(tuple(terms), delay, self.ttrain) if self.ttrain else None
+        tfit = None
+        if self.ttrain:
+            # twice: the prior's weight is relative to the residual level of the fit itself
+            tfit = T.fit_terms(tuple(terms), delay, self.ttrain, self.inertia)
+            if self.inertia is not None:
+                self.inertia.sigma = T.with_inertia_sigma(tfit, self.ttrain)
+                tfit = T.fit_terms(tuple(terms), delay, self.ttrain, self.inertia)
         lm = x = None
         if self.ftrain or self.fval:
             springs, x0 = [], []
@@ -180,9 +197,10 @@ class Problem:
         if cand.effect in TORQUE_EFFECTS and self.ttrain:
             if cand.effect == "sensor_delay":
                 base = tuple(t for t in tfit.terms if t.effect != "sensor_delay")
-                tfit = T.fit_with(base, 0.0, T.Term("sensor_delay", None), self.ttrain)
+                tfit = T.fit_with(base, 0.0, T.Term("sensor_delay", None), self.ttrain, self.inertia)
             else:
-                tfit = T.fit_with(tfit.terms, tfit.delay, T.Term(cand.effect, cand.joint, T.STRIBECK_VS[2]), self.ttrain)
+                tfit = T.fit_with(tfit.terms, tfit.delay, T.Term(cand.effect, cand.joint, T.STRIBECK_VS[2]), self.ttrain,
+                                  self.inertia)
         if cand.effect in LINEAR_EFFECTS and self.ftrain and lm is not None:
             lm, x = self._add_linear(lm, x, cand)
         return State(tfit, lm, x, state.added + (cand,))
@@ -481,10 +499,21 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
         d = by_name[name]
         if r["kind"] == "torque":
             s = next(s for s in problem.tval if s.name == name)
-            if "tau_repeats" in d.arrays:
+            if "tau_repeats" in d.arrays and s.cutoff is None:
                 src[name] = "propagated angle noise" if d.kind == "response" else "tau_repeats"
                 rep = d.arrays["tau_repeats"]
                 sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale / _mean_of(rep, d.arrays["tau"])
+            elif "tau_repeats" in d.arrays:
+                # repeats of raw torques through the same low-pass as the data
+                rep = d.arrays["tau_repeats"]
+                rf = np.stack([s.lp(r)[::s.processing.get("decimate", 1)] for r in rep])
+                sig = rf.std(axis=0, ddof=1).mean(axis=0) / s.scale / _mean_of(rep, d.arrays["tau"])
+                src[name] = "tau_repeats (filtered)"
+            elif s.noise is not None:
+                # angle-only log: what the processing predicts (raw torque spectrum above the motion
+                # band through the filter, plus the angle noise propagated through the model)
+                sig = s.noise / s.scale
+                src[name] = "filtered torque spectrum + propagated angle noise"
             else:
                 e = r["resid"]
                 d2 = e[2:] - 2 * e[1:-1] + e[:-2]
@@ -702,7 +731,7 @@ def signatures(problem: Problem, state: State, cands) -> dict:
                 cols = (np.gradient(T.predict(state.tfit, s), s.t, axis=0) / s.scale)[:, :, None]
             else:
                 h = {"stribeck_friction": T.STRIBECK_VS[1], "backlash": 0.01}.get(c.effect)
-                cols = T.Term(c.effect, c.joint, h).columns(s) / s.scale[None, :, None]
+                cols = T.term_columns(T.Term(c.effect, c.joint, h), s) / s.scale[None, :, None]
             for k in range(cols.shape[2]):
                 v = cols[:, :, k].ravel()
                 nv = np.linalg.norm(v)
@@ -925,6 +954,10 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     sel = forward_select(nom, ev0, floor, pool, refit, n_params=_n_params, max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select)
+    # an honest 'unexplained': a first effect that closes less than MIN_NAMED_SHRINK % of the
+    # excess is not named (the least bad candidate is not a diagnosis); the search stops there
+    if sel.steps and sel.steps[0].step_shrink < MIN_NAMED_SHRINK:
+        sel = Selection([], nom, ev0, "weak", sel.steps[0])
     selected = []
     for st in sel.steps:
         selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score))
@@ -940,11 +973,16 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
             ambiguous.append(dict(effects=[a["effect"], b["effect"]], joints=[a["joint"], b["joint"]],
                                   known_pair=pair in CONFOUNDED, shrink=[a["shrink"], b["shrink"]]))
     gap_after, _, exc_after = _combine(ev_cur, floor)
+    shrink_total = float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0
+    verdict = _verdict(significant, _significant(ev_cur, floor), bool(sel.steps), shrink_total)
     wh = where(pb, ev0, floor, case)
+    moves = link_moves(pb.robot, pb.inertia.pi0, nom.tfit.delta, pb.inertia) if pb.inertia is not None else []
     result = dict(
-        case=str(case.path), gap_before=gap0, gap_after=gap_after, noise_floor=fl,
+        case=str(case.path), verdict=verdict, stop_reason=_stop_reason(sel, pb.names),
+        gap_before=gap0, gap_after=gap_after, noise_floor=fl,
         noise_floor_per_dataset=floor, noise_floor_source=floor_source, excess_before=exc0, excess_after=exc_after,
-        shrink=float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0,
+        shrink=shrink_total, inertia_refit=moves,
+        processing={s_.name: s_.processing for s_ in pb.ttrain + pb.tval if s_.processing},
         significant=bool(significant), remaining_significant=bool(_significant(ev_cur, floor)),
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
         parameters=_parameters(pb, state), nominal_parameters=_parameters(pb, nom),
@@ -956,6 +994,36 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
         units={"gap": "NRMSE %", "noise_floor": "NRMSE %", "shrink": "% of the excess over noise closed"},
     )
     return Diagnosis(result, pb, nom, state, steps)
+
+
+def _verdict(significant: bool, remaining: bool, named: bool, shrink: float) -> str:
+    """``within_noise`` (no significant gap), ``explained`` (the named effects leave a gap within
+    noise or close EXPLAINED_SHRINK % of the excess), ``partly_explained`` (they close at least
+    MIN_NAMED_SHRINK %), else ``unexplained``."""
+    if not significant:
+        return "within_noise"
+    if named and (not remaining or shrink >= EXPLAINED_SHRINK):
+        return "explained"
+    if named and shrink >= MIN_NAMED_SHRINK:
+        return "partly_explained"
+    return "unexplained"
+
+
+def _stop_reason(sel: Selection, names) -> str:
+    """Why the search stopped, in words (the report's and diagnosis.json's ``stop_reason``)."""
+    best = sel.rejected.cand.label(names) if sel.rejected is not None else None
+    why = {
+        "not significant": "the nominal gap is within the noise floor: nothing to explain",
+        "within noise": "what remains is within the noise floor",
+        "max effects": "the most effects to add (max_effects) were added",
+        "no candidate": "no candidate effect applies to these data",
+        "too small": f"the best next candidate ({best}) closes less than {MIN_STEP_SHRINK:.0f} % of the remaining "
+                     "excess or does not pay for its parameters on held-out data",
+        "weak": f"the best candidate ({best}) closes only {sel.rejected.step_shrink:.0f} % of the excess gap "
+                f"(less than {MIN_NAMED_SHRINK:.0f} %): no effect of the library explains the gap"
+                if sel.rejected is not None else "",
+    }
+    return why.get(sel.stop, sel.stop)
 
 
 def _failed_solves(model: str, ev: dict) -> list:

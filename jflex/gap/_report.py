@@ -160,6 +160,23 @@ def markdown(r: dict, plots) -> str:
              f"{r['noise_floor']:.2f} %. Gap significant: **{r['significant']}**; the excess over noise closed: "
              f"**{r['shrink']:.0f} %**; what remains is {'still' if r['remaining_significant'] else 'not'} significant.")
     L.append("")
+    verdict = r.get("verdict")
+    if verdict:
+        L.append(f"**Verdict: {verdict.replace('_', ' ')}.** {r.get('stop_reason', '')}.")
+        L.append("")
+    moves = r.get("inertia_refit") or []
+    if moves:
+        L += ["## Nominal identification: how far the CAD inertias moved", "",
+              "The nominal model's inertial parameters were refitted on the torque training data (with the nominal "
+              "friction), pulled toward CAD and kept within its tolerance. A link that reached the tolerance bound "
+              "moved further than a CAD error does (a payload, a wrong part): the first place to look.", "",
+              "| link | mass CAD [kg] | mass fitted [kg] | change [%] | COM shift [mm] | at tolerance bound |",
+              "|---|---|---|---|---|---|"]
+        for m in moves:
+            ch = "-" if m["mass_change_pct"] is None else f"{m['mass_change_pct']:+.1f}"
+            L.append(f"| {m['link']} | {m['mass_cad_kg']:.3f} | {m['mass_kg']:.3f} | {ch} | {1e3 * m['com_shift_m']:.1f} | "
+                     f"{'yes' if m['at_tolerance_bound'] else 'no'} |")
+        L.append("")
     L.append("## Selected effects (in order added)")
     if r["selected"]:
         L += ["| effect | joint / link | gap after [%] | shrink [%] | score |", "|---|---|---|---|---|"]

@@ -5,8 +5,9 @@ Along a measured motion the inverse dynamics of the nominal model plus effects i
 $$ \\tau(t) = S_d\\big[\\tau_{rigid}(q, \\dot q, \\ddot q) + \\sum_e Y_e(q, \\dot q, \\ddot q; h_e)\\,\\theta_e\\big], $$
 
 linear in every effect's coefficients ``theta_e`` once its few nonlinear hyper-parameters ``h_e``
-(Stribeck velocity, sensor delay ``d`` of the shift operator ``S_d``) are fixed. So each refit is
-a bounded linear least-squares solve (warm start: the hyper-parameters of effects already in the
+(Stribeck velocity, sensor delay ``d`` of the shift operator ``S_d``) are fixed. With the nominal
+identification (:mod:`._inertia`) ``tau_rigid = Y (pi_cad + delta)`` and ``delta`` is fitted with
+the coefficients. So each refit is a bounded linear least-squares solve (warm start: the hyper-parameters of effects already in the
 model are kept; only a new effect's are searched on a grid). Each term's columns equal minus the
 generalised force of the matching :mod:`jflex.effects` effect (checked in the tests).
 """
@@ -21,6 +22,9 @@ import numpy as np
 import scipy.optimize as so
 
 from .._dynamics import regressor, rnea
+from .._errors import DataError
+from ..identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
+                                motion_band, zero_phase_lowpass)
 
 EPS_SIGN = 0.005  # [rad/s] width of the smooth sign used by every Coulomb-like term (dry friction is sharp)
 STRIBECK_VS = (0.03, 0.06, 0.12, 0.25, 0.5)  # [rad/s] grid of Stribeck velocities
@@ -29,7 +33,11 @@ DELAYS = tuple(np.round(np.arange(0.001, 0.0605, 0.001), 4))  # [s] grid of sens
 
 @dataclasses.dataclass
 class TorqueSet:
-    """Precomputed quantities of one torque data set (numpy, (N, n) unless noted)."""
+    """Precomputed quantities of one torque data set (numpy, (N, n) unless noted).
+
+    ``q``, ``qd``, ``qdd`` are the motion the model sees (filtered and differentiated when the set
+    gave angles only); ``tau`` is what the model is compared with: the measured torque, low-passed
+    by the same filter ``lp`` as every model column (parallel filtering) when there is one."""
 
     name: str
     t: np.ndarray
@@ -37,14 +45,28 @@ class TorqueSet:
     qd: np.ndarray
     qdd: np.ndarray
     tau: np.ndarray
-    F0: np.ndarray  # rigid inverse dynamics of the nominal robot
+    F0: np.ndarray  # rigid inverse dynamics of the nominal (CAD) robot
     scale: np.ndarray  # (n,) std of the measured torque per joint
-    Ypay: np.ndarray  # (N, n, 4) regressor columns [m, mcx, mcy, mcz] of the last link
-    dFdq: np.ndarray  # (N, n, n) d tau_rigid / d q
+    Y: np.ndarray  # (N, n, 10 n) joint-torque regressor along the motion
     q_extra: np.ndarray
     extra_joints: tuple
     robot: object = None
-    cache: dict = dataclasses.field(default_factory=dict)  # backlash torques per (joint, b)
+    cutoff: float | None = None  # [Hz] of the parallel low-pass (None: the data came differentiated)
+    noise: np.ndarray | None = None  # (n,) torque-residual noise std [N m] the processing predicts
+    processing: dict = dataclasses.field(default_factory=dict)  # what was derived, for the report
+    cache: dict = dataclasses.field(default_factory=dict)  # backlash torques, filtered columns
+
+    @property
+    def Ypay(self) -> np.ndarray:
+        """(N, n, 10) regressor columns of the last link (a payload's parameters)."""
+        n = self.q.shape[1]
+        return self.Y[:, :, 10 * (n - 1):10 * n]
+
+    def lp(self, X):
+        """The parallel filter applied to a model quantity (N, ...) (identity without one)."""
+        if self.cutoff is None:
+            return X
+        return zero_phase_lowpass(X, float(np.mean(np.diff(self.t))), self.cutoff)
 
 
 @jax.jit
@@ -52,7 +74,7 @@ def _id_batch(robot, q, qd, qdd):
     return jax.vmap(lambda a, b, c: rnea(robot, a, b, c))(q, qd, qdd)
 
 
-def zero_phase_lowpass(x, t, tau):
+def first_order_zero_phase(x, t, tau):
     """First-order low-pass run forwards and backwards (no lag), time constant ``tau`` [s]."""
     import scipy.signal as ss
 
@@ -75,22 +97,89 @@ BACKLASH_B = (0.003, 0.005, 0.0075, 0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.
 
 @jax.jit
 def _rigid_batch(robot, q, qd, qdd):
-    f = lambda a, b, c: rnea(robot, a, b, c)
-    F = jax.vmap(f)(q, qd, qdd)
-    J = jax.vmap(jax.jacfwd(f, argnums=0))(q, qd, qdd)
-    Y = jax.vmap(lambda a, b, c: regressor(robot, a, b, c))(q, qd, qdd)
-    return F, J, Y
+    """Inverse dynamics (N, n) and regressor (N, n, 10 n) along a motion. The regressor is the
+    Jacobian of RNEA in the inertial parameters (RNEA is linear in them): one JVP of the traversal
+    compiles in a fraction of the time of the per-parameter regressor."""
+    import equinox as eqx
+
+    pi = robot.inertia.reshape(-1)
+
+    def f(p, a, b, c):
+        return rnea(eqx.tree_at(lambda r: r.inertia, robot, p.reshape(robot.inertia.shape)), a, b, c)
+
+    F = jax.vmap(lambda a, b, c: f(pi, a, b, c))(q, qd, qdd)
+    Y = jax.vmap(lambda a, b, c: jax.jacfwd(f)(pi, a, b, c))(q, qd, qdd)
+    return F, Y
 
 
-def torque_set(robot, ds) -> TorqueSet:
-    """Precompute one torque data set (:class:`jflex.gap.Dataset`) for ``robot``."""
+CUTOFF_FACTOR = 2.5  # the parallel low-pass sits at 2.5 x the motion's band (seed 003 3.2: 2-5 x)
+NOISE_DRAWS = 4  # angle-noise redraws propagated through the processing and the model (noise floor)
+NOISE_BAND = (1.5, 4.0)  # x the motion band: where the raw torque's noise level is read
+
+
+def derivatives_given(ds) -> bool:
+    """Whether a torque set recorded its own rates and accelerations. The loader fills missing
+    ones with central differences of ``q`` (bit for bit), which is how an angle-only log is told
+    apart here."""
     a = ds.arrays
-    q, qd, qdd = (jnp.asarray(a[k]) for k in ("q", "qd", "qdd"))
-    F, J, Y = _rigid_batch(robot, q, qd, qdd)
+    return not np.array_equal(a["qd"], np.gradient(a["q"], a["t"], axis=0))
+
+
+def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
+    """Precompute one torque data set (:class:`jflex.gap.Dataset`) for ``robot``.
+
+    A set that gave angles only (a real log: encoder angles, quantised, and motor torques) is
+    processed as for identification: the motion's band is read off the angle spectrum against the
+    angle noise (:func:`jflex.identify.motion_band`), the angles are low-passed at ``cutoff_hz``
+    (``"auto"``: ``CUTOFF_FACTOR`` x that band) with a zero-phase Butterworth filter and
+    differentiated, and the same filter is applied to the measured torques and to every model
+    column (parallel filtering), optionally followed by keeping every ``decimate``-th sample. The
+    noise the filtered residual keeps is predicted from the raw torque's spectrum just above the
+    motion band (extrapolated flat into it and weighted by the filter) plus the angle noise
+    propagated through the processing and the model (``NOISE_DRAWS`` redraws)."""
+    a = ds.arrays
+    t, tau_raw = np.asarray(a["t"], float), np.asarray(a["tau"], float)
     n = robot.nq
-    Ypay = np.asarray(Y)[:, :, 10 * (n - 1): 10 * n]
-    return TorqueSet(ds.name, a["t"], a["q"], a["qd"], a["qdd"], a["tau"], np.asarray(F),
-                     np.maximum(a["tau"].std(axis=0), 1e-9), Ypay, np.asarray(J), a["q_extra"], ds.extra_joints, robot)
+    if derivatives_given(ds):
+        q, qd, qdd = a["q"], a["qd"], a["qdd"]
+        F, Y = (np.asarray(v) for v in _rigid_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
+        return TorqueSet(ds.name, t, q, qd, qdd, tau_raw, F, np.maximum(tau_raw.std(axis=0), 1e-9), Y,
+                         a["q_extra"], ds.extra_joints, robot)
+    dt = np.diff(t)
+    h = float(dt.mean())
+    if np.max(np.abs(dt - h)) > 0.01 * h:
+        raise DataError(f"{ds.name}: field 't': a torque set with angles only (no qd/qdd) needs uniform sampling "
+                        f"(steps vary by {100 * np.max(np.abs(dt - h)) / h:.1f} %, more than 1 %)")
+    sig_q = angle_noise(a["q"])
+    f_m = motion_band(a["q"], h, sig_q)
+    fc = CUTOFF_FACTOR * f_m if cutoff_hz in (None, "auto") else float(cutoff_hz)
+    nyq = 0.5 / (h * decimate)
+    if not 0 < fc < 0.9 * nyq:
+        raise DataError(f"{ds.name}: the low-pass cutoff {fc:.3g} Hz must lie below 0.9 x the Nyquist frequency "
+                        f"{nyq:.3g} Hz{' after decimation' if decimate > 1 else ''} (options.filter_cutoff_hz, options.decimate)")
+    q, qd, qdd = filtered_derivatives(a["q"], h, fc)
+    tau = zero_phase_lowpass(tau_raw, h, fc)
+    # noise of the filtered torque: the raw torque's PSD above the motion (measured), extrapolated
+    # flat below 1.5 f_m, times the filter's power gain
+    level, f, P = band_noise_psd(tau_raw, h, NOISE_BAND[0] * f_m, NOISE_BAND[1] * f_m)
+    g = lowpass_power_gain(f, h, fc)
+    df = f[1] - f[0]
+    hi = f > NOISE_BAND[0] * f_m
+    var_tau = (P[hi] * g[hi, None]).sum(axis=0) * df + level * (g[~hi].sum() * df)
+    rng = np.random.default_rng(0)
+    F, Y = (np.asarray(v) for v in _rigid_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
+    dev = []
+    for _ in range(NOISE_DRAWS):
+        qk, qdk, qddk = filtered_derivatives(a["q"] + sig_q * rng.standard_normal(a["q"].shape), h, fc)
+        dev.append(np.asarray(_id_batch(robot, jnp.asarray(qk), jnp.asarray(qdk), jnp.asarray(qddk))) - F)
+    var_q = np.mean([d.var(axis=0) for d in dev], axis=0)
+    k = int(decimate)
+    sl = slice(None, None, k)
+    processing = {"angle_noise_rad": sig_q.tolist(), "motion_band_hz": f_m, "cutoff_hz": fc, "decimate": k,
+                  "torque_noise_nm": np.sqrt(var_tau).tolist(), "propagated_angle_noise_nm": np.sqrt(var_q).tolist()}
+    return TorqueSet(ds.name, t[sl], q[sl], qd[sl], qdd[sl], tau[sl], F[sl], np.maximum(tau.std(axis=0), 1e-9), Y[sl],
+                     a["q_extra"][sl], ds.extra_joints, robot, cutoff=fc, noise=np.sqrt(var_tau + var_q),
+                     processing=processing)
 
 
 BACKLASH_ENGAGE = (0.004, 0.008, 0.012)  # [s] grid of engagement smoothing (contact compliance) time constants
@@ -116,13 +205,13 @@ def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
     key = ("backlash", j, b, tau_e)
     if key not in s.cache:
         ql, qdl = s.q.copy(), s.qd.copy()
-        ql[:, j] = zero_phase_lowpass(play(s.q[:, j], b), s.t, tau_e)
+        ql[:, j] = first_order_zero_phase(play(s.q[:, j], b), s.t, tau_e)
         qdl[:, j] = np.gradient(ql[:, j], s.t)
         Fa = np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(s.qdd)))
         cols = [Fa - s.F0]
         for w in BACKLASH_PULSES:
             qdd = s.qdd.copy()
-            qdd[:, j] = np.gradient(zero_phase_lowpass(qdl[:, j], s.t, w), s.t)
+            qdd[:, j] = np.gradient(first_order_zero_phase(qdl[:, j], s.t, w), s.t)
             cols.append(np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qdd))) - Fa)
         s.cache[key] = np.stack(cols, axis=2)
     return s.cache[key]
@@ -213,59 +302,129 @@ class Term:
 
 @dataclasses.dataclass
 class TorqueFit:
+    """Fitted torque terms: coefficients ``theta`` of ``terms``, the sensor ``delay`` [s] and, when
+    the inertial parameters were refitted, ``delta`` (10 n) from CAD with its ``prior``."""
+
     terms: tuple
     delay: float
     theta: np.ndarray
     cost: float
+    delta: np.ndarray | None = None
+    prior: object = None
+    cov_delta: np.ndarray | None = None  # (10 n, 10 n) covariance of delta (bounds inactive)
 
 
-def _design(terms, delay, s: TorqueSet):
-    cols = [t.columns(s) for t in terms if t.n_params]
-    A = np.concatenate(cols, axis=2) if cols else np.zeros(s.q.shape + (0,))
-    A = shift(A, s.t, delay)
-    y = s.tau - shift(s.F0, s.t, delay)
+def term_columns(term: Term, s: TorqueSet) -> np.ndarray:
+    """(N, n, k) columns of ``term`` on ``s``, through the set's parallel filter (cached)."""
+    key = ("cols", term)
+    if key not in s.cache:
+        s.cache[key] = s.lp(term.columns(s))
+    return s.cache[key]
+
+
+def _filtered(s: TorqueSet, name: str):
+    key = ("lp", name)
+    if key not in s.cache:
+        X = getattr(s, name)
+        s.cache[key] = s.lp(X.reshape(X.shape[0], -1)).reshape(X.shape)
+    return s.cache[key]
+
+
+def _gram(terms, delay, s: TorqueSet, inertia):
+    """Normal equations of one set, rows normalised by the set's torque scale: ``(G, b, y'y, rows)``
+    over ``[delta (if inertia), theta]``. The delay advances the measurement (``tau(t + d)``), so
+    the model's columns, and the Gram of the regressor, do not change with it."""
     w = 1.0 / s.scale
-    return (A * w[None, :, None]).reshape(A.shape[0] * A.shape[1], A.shape[2]), (y * w[None, :]).ravel()
+    cols = [term_columns(t, s) for t in terms if t.n_params]
+    A = (np.concatenate(cols, axis=2) if cols else np.zeros(s.q.shape + (0,))) * w[None, :, None]
+    A = A.reshape(s.tau.size, A.shape[2])
+    y = ((shift(s.tau, s.t, -delay) - _filtered(s, "F0")) * w[None, :]).ravel()
+    if inertia is None:
+        return A.T @ A, A.T @ y, float(y @ y), y.size
+    if "Yw" not in s.cache:
+        Yw = (_filtered(s, "Y") * w[None, :, None]).reshape(y.size, -1)
+        s.cache["Yw"] = (Yw, Yw.T @ Yw)
+    Yw, YtY = s.cache["Yw"]
+    AtY = A.T @ Yw
+    G = np.block([[YtY, AtY.T], [AtY, A.T @ A]])
+    return G, np.concatenate([Yw.T @ y, A.T @ y]), float(y @ y), y.size
 
 
-def fit_terms(terms, delay, sets) -> TorqueFit:
-    """Bounded least squares of the terms' coefficients on the torque sets (channel-normalised)."""
-    As, ys = zip(*[_design(terms, delay, s) for s in sets])
-    A, y = np.concatenate(As), np.concatenate(ys)
-    p = A.shape[1]
+def _bounded_normal_solve(G, b, lo, hi):
+    """``min x'Gx - 2 b'x`` within bounds, through the Cholesky factor of the column-scaled ``G``
+    (a small square problem whatever the number of samples)."""
+    d = np.sqrt(np.maximum(np.diag(G), 0.0))
+    d = np.where(d > 1e-12 * max(d.max(), 1e-300), d, 1.0)
+    Gs = G / d[:, None] / d[None, :]
+    Gs[np.diag_indices_from(Gs)] += 1e-12
+    L = np.linalg.cholesky(Gs)
+    z = np.linalg.solve(L, b / d)
+    if np.all(np.isinf(lo)) and np.all(np.isinf(hi)):
+        return np.linalg.solve(L.T, z) / d
+    r = so.lsq_linear(L.T, z, bounds=(lo * d, hi * d), method="bvls")
+    return r.x / d
+
+
+def fit_terms(terms, delay, sets, inertia=None) -> TorqueFit:
+    """Bounded least squares of the terms' coefficients on the torque sets (channel-normalised),
+    with the inertial parameters' change from CAD when ``inertia`` (:class:`._inertia.InertiaPrior`)
+    is given."""
+    terms = tuple(terms)
+    P = inertia.size if inertia is not None else 0
+    G = b = None
+    yy, rows = 0.0, 0
+    for s in sets:
+        g, bb, y2, m = _gram(terms, delay, s, inertia)
+        G, b = (g, bb) if G is None else (G + g, b + bb)
+        yy, rows = yy + y2, rows + m
+    p = G.shape[0]
     if p == 0:
-        return TorqueFit(tuple(terms), delay, np.zeros(0), float(y @ y))
-    lo = np.concatenate([t.bounds()[0] for t in terms if t.n_params])
-    hi = np.concatenate([t.bounds()[1] for t in terms if t.n_params])
-    # column scaling keeps the bounded solver well conditioned (payload and friction differ by 1e3)
-    cs = np.maximum(np.linalg.norm(A, axis=0), 1e-12)
-    r = so.lsq_linear(A / cs, y, bounds=(lo * cs, hi * cs), method="bvls" if p <= 40 else "trf")
-    theta = r.x / cs
-    res = A @ theta - y
-    return TorqueFit(tuple(terms), delay, theta, float(res @ res))
+        return TorqueFit(terms, delay, np.zeros(0), yy)
+    lo = [np.concatenate([t.bounds()[0] for t in terms if t.n_params] or [np.zeros(0)])]
+    hi = [np.concatenate([t.bounds()[1] for t in terms if t.n_params] or [np.zeros(0)])]
+    Gp = G.copy()
+    if P:
+        l, h = inertia.bounds()
+        lo, hi = [l] + lo, [h] + hi
+        Gp[np.arange(P), np.arange(P)] += inertia.penalty()
+    x = _bounded_normal_solve(Gp, b, np.concatenate(lo), np.concatenate(hi))
+    cost = float(yy - 2 * x @ b + x @ G @ x)
+    cov = None
+    if P:
+        sig2 = max(cost, 0.0) / max(rows - p, 1)
+        cov = sig2 * np.linalg.pinv(Gp, rcond=1e-13, hermitian=True)[:P, :P]
+    return TorqueFit(terms, delay, x[P:], max(cost, 0.0), x[:P] if P else None, inertia, cov)
 
 
 def predict(fit: TorqueFit, s: TorqueSet) -> np.ndarray:
-    """Model torque (N, n) on one set."""
-    cols = [t.columns(s) for t in fit.terms if t.n_params]
-    pred = s.F0.copy()
+    """Model torque (N, n) on one set (through its parallel filter, then delayed)."""
+    cols = [term_columns(t, s) for t in fit.terms if t.n_params]
+    pred = _filtered(s, "F0").copy()
     if cols:
         pred = pred + np.concatenate(cols, axis=2) @ fit.theta
+    if fit.delta is not None:
+        pred = pred + _filtered(s, "Y") @ fit.delta
     return shift(pred, s.t, fit.delay)
 
 
-def fit_with(base_terms, base_delay, new: Term | None, sets) -> TorqueFit:
+def with_inertia_sigma(fit: TorqueFit, sets) -> float:
+    """Normalised RMS training residual of a fit: the noise level its inertial prior is weighed against."""
+    rows = sum(s.tau.size for s in sets)
+    return float(np.sqrt(fit.cost / max(rows, 1)))
+
+
+def fit_with(base_terms, base_delay, new: Term | None, sets, inertia=None) -> TorqueFit:
     """Refit with ``new`` added; its hyper-parameter (if any) searched on a grid by training cost."""
     if new is None:
-        return fit_terms(base_terms, base_delay, sets)
+        return fit_terms(base_terms, base_delay, sets, inertia)
     if new.effect == "sensor_delay":
-        fits = [fit_terms(base_terms, d, sets) for d in DELAYS]
+        fits = [fit_terms(base_terms, d, sets, inertia) for d in DELAYS]
         best = min(fits, key=lambda f: f.cost)
         return TorqueFit(best.terms + (Term("sensor_delay", None, best.delay),), best.delay, best.theta, best.cost)
     if new.effect == "backlash":
         # play half-width on a grid (engagement BACKLASH_ENGAGE_FIRST), the engagement time on its grid, then the
         # half-width refined around the best
-        fit = lambda h: fit_terms(tuple(base_terms) + (Term("backlash", new.joint, h),), base_delay, sets)
+        fit = lambda h: fit_terms(tuple(base_terms) + (Term("backlash", new.joint, h),), base_delay, sets, inertia)
         best = min((fit((b, BACKLASH_ENGAGE_FIRST)) for b in BACKLASH_B), key=lambda f: f.cost)
         b = best.terms[-1].hyper[0]
         best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != BACKLASH_ENGAGE_FIRST], key=lambda f: f.cost)
@@ -276,9 +435,9 @@ def fit_with(base_terms, base_delay, new: Term | None, sets) -> TorqueFit:
         return best
     grid = {"stribeck_friction": STRIBECK_VS}.get(new.effect)
     if grid is not None:
-        fits = [fit_terms(tuple(base_terms) + (Term(new.effect, new.joint, v),), base_delay, sets) for v in grid]
+        fits = [fit_terms(tuple(base_terms) + (Term(new.effect, new.joint, v),), base_delay, sets, inertia) for v in grid]
         return min(fits, key=lambda f: f.cost)
-    return fit_terms(tuple(base_terms) + (new,), base_delay, sets)
+    return fit_terms(tuple(base_terms) + (new,), base_delay, sets, inertia)
 
 
 def term_parameters(fit: TorqueFit, joint_names) -> dict:

@@ -53,3 +53,102 @@ def spectral_derivatives(q, dt: float, cutoff: float | None = None):
     qd = np.fft.irfft(1j * w * X, n=n, axis=0)
     qdd = np.fft.irfft(-(w**2) * X, n=n, axis=0)
     return q_f, qd, qdd
+
+
+# --- records that are not periodic: measured logs -------------------------------------------------
+BUTTER_ORDER = 4  # zero-phase Butterworth: order 4 each way (8 in all), flat pass band, no lag
+MOTION_SNR = 100.0  # the motion's band ends where its angle spectrum falls to 100 x the angle noise
+
+
+def angle_noise(q):
+    """Noise std [rad] per column of sampled angles ``q`` (N, n): the larger of the white-noise
+    estimate from the robust spread of the second difference, ``MAD(d2 q) / sqrt(6)``, and the
+    quantisation noise ``step / sqrt(12)`` of an encoder whose readings sit on a grid (the second
+    difference of a slowly moving quantised angle is mostly zero, so its MAD alone reads ~0)."""
+    q = np.asarray(q, dtype=float)
+    d2 = q[2:] - 2 * q[1:-1] + q[:-2]
+    mad = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
+    out = np.empty(q.shape[1])
+    for j in range(q.shape[1]):
+        dq = np.abs(np.diff(q[:, j]))
+        dq = dq[dq > 1e-15]
+        step = 0.0
+        if dq.size:
+            s0 = float(np.min(dq))
+            # a grid: every increment is (near) a whole number of the smallest one
+            if s0 > 0 and np.all(np.abs(dq / s0 - np.round(dq / s0)) < 0.02):
+                step = s0
+        out[j] = max(float(mad[j]), step / np.sqrt(12.0))
+    return out
+
+
+def motion_band(q, dt: float, noise=None) -> float:
+    """Highest frequency [Hz] where some column's angle spectrum (Welch) stands ``MOTION_SNR``
+    above the white angle noise ``noise`` (std per column, default :func:`angle_noise`)."""
+    from scipy.signal import welch
+
+    q = np.asarray(q, dtype=float)
+    fs = 1.0 / dt
+    sig = angle_noise(q) if noise is None else np.broadcast_to(np.asarray(noise, float), (q.shape[1],))
+    # a floor relative to the motion keeps noise-free (synthetic or pre-filtered) angles finite
+    sig = np.maximum(sig, 1e-9 * np.maximum(q.std(axis=0), 1e-12))
+    # on the second difference: it whitens the motion's steep spectrum, so the window's leakage
+    # from the strong low-frequency lines no longer reads as motion far above them
+    d2 = q[2:] - 2 * q[1:-1] + q[:-2]
+    f, P = welch(d2, fs=fs, nperseg=min(len(d2), 1024), window="blackmanharris", axis=0)
+    gain = (2.0 - 2.0 * np.cos(2 * np.pi * f * dt)) ** 2  # |d2|^2 on white noise
+    level = 2.0 * sig[None, :] ** 2 / fs * np.maximum(gain[:, None], 1e-300)
+    above = (P > MOTION_SNR * level).any(axis=1)
+    above[0] = False
+    return float(f[np.flatnonzero(above)[-1]]) if above.any() else float(f[1])
+
+
+def zero_phase_lowpass(x, dt: float, cutoff: float):
+    """Zero-phase Butterworth low-pass (order ``BUTTER_ORDER``, run forwards and backwards) along
+    axis 0 of ``x`` (N, ...), ``cutoff`` [Hz] (its -6 dB point; the pass band is flat, so a model
+    linear in its parameters filtered in parallel with the data keeps its parameters)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    x = np.asarray(x, dtype=float)
+    nyq = 0.5 / dt
+    if not 0 < cutoff < nyq:
+        raise DataError(f"zero_phase_lowpass: cutoff must lie in (0, {nyq:g}) Hz (Nyquist), got {cutoff}")
+    sos = butter(BUTTER_ORDER, cutoff / nyq, output="sos")
+    pad = min(3 * (2 * BUTTER_ORDER + 1) * 4, x.shape[0] - 1)
+    return sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=pad)
+
+
+def lowpass_power_gain(f, dt: float, cutoff: float):
+    """``|H(f)|^4`` of :func:`zero_phase_lowpass` at frequencies ``f`` [Hz]: the fraction of a noise
+    power spectral density that passes it."""
+    from scipy.signal import butter, sosfreqz
+
+    sos = butter(BUTTER_ORDER, cutoff / (0.5 / dt), output="sos")
+    _, h = sosfreqz(sos, worN=np.asarray(f, float), fs=1.0 / dt)
+    return np.abs(h) ** 4
+
+
+def filtered_derivatives(q, dt: float, cutoff: float):
+    """Angles, rates and accelerations of a measured (non-periodic) log: :func:`zero_phase_lowpass`
+    of ``q`` (N, n), then central differences of the smooth signal (the filter has removed what
+    differentiation would amplify). **Returns** ``(q_f, qd, qdd)``, each (N, n)."""
+    qf = zero_phase_lowpass(q, dt, cutoff)
+    qd = np.gradient(qf, dt, axis=0)
+    qdd = np.gradient(qd, dt, axis=0)
+    return qf, qd, qdd
+
+
+def band_noise_psd(x, dt: float, f_lo: float, f_hi: float):
+    """Noise power spectral density level [x^2/Hz] per column of ``x`` (N, n): the median Welch
+    PSD over the band (f_lo, f_hi) above the motion (the median ignores harmonics of a few sharp
+    events). Also returns the Welch frequencies and PSD ``(level (n,), f, P)``."""
+    from scipy.signal import welch
+
+    x = np.asarray(x, dtype=float)
+    f, P = welch(x - x.mean(axis=0), fs=1.0 / dt, nperseg=min(len(x), 1024), axis=0)
+    m = (f > f_lo) & (f < f_hi)
+    if m.sum() < 3:
+        m = f > f_lo
+    if not m.any():
+        return np.zeros(x.shape[1]), f, P
+    return np.median(P[m], axis=0), f, P
