@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from ._case import Case, load_case
+from ._effect_term import EffectCandidate, EffectTerm
 from ._inertia import inertia_prior, link_moves
 from . import _linear as L
 from . import _response as R
@@ -77,7 +78,7 @@ def _is_output_error(d) -> bool:
 class Problem:
     """Precomputed data of a case for repeated refits."""
 
-    def __init__(self, case: Case):
+    def __init__(self, case: Case, candidates=()):
         self.case = case
         self.robot = case.robot
         self.names = tuple(self.robot.joint_names)
@@ -98,6 +99,17 @@ class Problem:
         self.rval = [R.response_set(self.robot, d, case.tool_frame) for d in case.split("validation") if _is_output_error(d)]
         self.responses = [d for d in case.split("train") if _is_output_error(d)]
         self.nominal = {(e["effect"], self.names.index(j)) for e in case.nominal_effects for j in e["joints"]}
+        # candidate effects given as jflex.effects effects (the user's own laws among them)
+        self.user = {}
+        for ec in candidates:
+            if not isinstance(ec, EffectCandidate):
+                raise TypeError(f"diagnose: candidates must be jflex.gap.EffectCandidate, got {type(ec).__name__}")
+            j = None if ec.joint is None else self.names.index(ec.joint) if ec.joint in self.names else None
+            if ec.joint is not None and j is None:
+                from .._errors import ParameterError
+
+                raise ParameterError(f"EffectCandidate '{ec.name}': joint '{ec.joint}' is not a model joint {list(self.names)}")
+            self.user[Candidate(ec.name, j)] = ec.bind(self.robot)
         self.nominal_effects = case.nominal_effects
         # rotor inertia [kg m^2] the case states (nominal rotor_inertia with a value): the motor
         # side of a simulated spring when no torque training set fits it
@@ -170,6 +182,8 @@ class Problem:
                     if eff == "coulomb_friction" and ("stribeck_friction", j) in self.nominal:
                         continue
                     out.append(Candidate(eff, j))
+        if self.ttrain:
+            out += list(self.user)
         if self.ftrain:
             flex = {s.where for s in self._nominal_springs()}
             for j in range(self.n):
@@ -194,7 +208,9 @@ class Problem:
     def add(self, state: State, cand: Candidate) -> State:
         """Refit with ``cand`` added (warm start from ``state``)."""
         tfit, lm, x = state.tfit, state.lm, state.x
-        if cand.effect in TORQUE_EFFECTS and self.ttrain:
+        if cand in self.user and self.ttrain:
+            tfit = T.fit_with(tfit.terms, tfit.delay, EffectTerm(self.user[cand], cand.joint), self.ttrain, self.inertia)
+        elif cand.effect in TORQUE_EFFECTS and self.ttrain:
             if cand.effect == "sensor_delay":
                 base = tuple(t for t in tfit.terms if t.effect != "sensor_delay")
                 tfit = T.fit_with(base, 0.0, T.Term("sensor_delay", None), self.ttrain, self.inertia)
@@ -707,7 +723,9 @@ def step_record(added, ev, floor) -> dict:
     return dict(added=added, gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()})
 
 
-def _n_params(c: Candidate) -> int:
+def _n_params(c: Candidate, user=None) -> int:
+    if user and c in user:
+        return user[c].size
     return {"stribeck_friction": 3, "gravity_compensator": 4, "payload": 10, "orthogonal_compliance": 4,
             "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2,
             "backlash": 1 + len(T.BACKLASH_PULSES)}.get(c.effect, 1)
@@ -890,14 +908,17 @@ def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None):
     return e
 
 
-def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> Diagnosis:
+def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int = 10, progress=None) -> Diagnosis:
     """Fit the nominal model on the training data, localise the validation gap, test candidate
     effects and select a set by forward selection on held-out data.
 
     **Arguments:**
 
     - ``case``: a :class:`jflex.gap.Case` or a path to a case folder / ``case.yaml``.
-    - ``max_effects``: most effects to add; ``prune``: torque candidates refitted per round,
+    - ``candidates``: extra candidate effects, :class:`jflex.gap.EffectCandidate` (any
+      :mod:`jflex.effects` effect, a user's own class included), tried beside the built-in ones.
+    - ``max_effects``: most effects to add (default: the case's ``options.max_effects``, 3);
+      ``prune``: torque candidates refitted per round,
       the best by residual signature (frequency-side candidates are few and all refitted).
     - ``progress``: optional ``callable(str)`` for progress lines.
 
@@ -907,7 +928,9 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     say = progress or (lambda s: None)
     if not isinstance(case, Case):
         case = load_case(case)
-    pb = Problem(case)
+    pb = Problem(case, candidates)
+    if max_effects is None:
+        max_effects = int(pb.options["max_effects"])
     say(f"nominal fit ({len(pb.ttrain)} torque, {len(pb.ftrain)} frf/modal training sets)")
     nom = pb.nominal_state()
     ev0 = pb.evaluate(nom)
@@ -926,7 +949,7 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
         st = pb.add(nom, c)
         ev = pb.evaluate(st)
         failed += _failed_solves(c.label(pb.names), ev)
-        score = -_ic_delta(ev, ev0, _n_params(c))
+        score = -_ic_delta(ev, ev0, _n_params(c, pb.user))
         fitted[c] = (st, ev)
         ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c)))
         say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
@@ -951,7 +974,7 @@ def diagnose(case, *, max_effects: int = 3, prune: int = 10, progress=None) -> D
     def on_select(step):
         say(f"selected {step.cand.label(pb.names)}: gap {_combine(step.ev, floor)[0]:.2f} %")
 
-    sel = forward_select(nom, ev0, floor, pool, refit, n_params=_n_params, max_effects=max_effects if keep else 0,
+    sel = forward_select(nom, ev0, floor, pool, refit, n_params=lambda c: _n_params(c, pb.user), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select)
     # an honest 'unexplained': a first effect that closes less than MIN_NAMED_SHRINK % of the

@@ -115,6 +115,7 @@ def _rigid_batch(robot, q, qd, qdd):
 CUTOFF_FACTOR = 2.5  # the parallel low-pass sits at 2.5 x the motion's band (seed 003 3.2: 2-5 x)
 NOISE_DRAWS = 4  # angle-noise redraws propagated through the processing and the model (noise floor)
 NOISE_BAND = (1.5, 4.0)  # x the motion band: where the raw torque's noise level is read
+EDGE_PERIODS = 2.0  # periods of the cutoff trimmed off each end of a filtered record (transients)
 
 
 def derivatives_given(ds) -> bool:
@@ -174,10 +175,16 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
         dev.append(np.asarray(_id_batch(robot, jnp.asarray(qk), jnp.asarray(qdk), jnp.asarray(qddk))) - F)
     var_q = np.mean([d.var(axis=0) for d in dev], axis=0)
     k = int(decimate)
-    sl = slice(None, None, k)
+    # the filter's start and end transients (zero-phase: both ends) are cut off the record
+    edge = int(np.ceil(EDGE_PERIODS / fc / h))
+    if t.size - 2 * edge < 20 * k:
+        raise DataError(f"{ds.name}: field 't': the record ({t[-1] - t[0]:.3g} s) is too short for its low-pass at "
+                        f"{fc:.3g} Hz, whose transients take {edge * h:.3g} s at each end")
+    sl = slice(edge, t.size - edge, k)
     processing = {"angle_noise_rad": sig_q.tolist(), "motion_band_hz": f_m, "cutoff_hz": fc, "decimate": k,
+                  "trimmed_s": edge * h,
                   "torque_noise_nm": np.sqrt(var_tau).tolist(), "propagated_angle_noise_nm": np.sqrt(var_q).tolist()}
-    return TorqueSet(ds.name, t[sl], q[sl], qd[sl], qdd[sl], tau[sl], F[sl], np.maximum(tau.std(axis=0), 1e-9), Y[sl],
+    return TorqueSet(ds.name, t[sl], q[sl], qd[sl], qdd[sl], tau[sl], F[sl], np.maximum(tau[sl].std(axis=0), 1e-9), Y[sl],
                      a["q_extra"][sl], ds.extra_joints, robot, cutoff=fc, noise=np.sqrt(var_tau + var_q),
                      processing=processing)
 
