@@ -11,7 +11,7 @@ model is the poorest variant, F.L-R.H. Candidate steps: the flexible joint (``F.
 (``F.H``, effect ``link_flexibility`` of link ``hub``: the hub's E I refitted). Each candidate's
 variant is refitted on the train record from a perturbed start by Levenberg-Marquardt on exact
 forward-mode Jacobians through the simulation, then scored on the validation record, and the
-ladder is climbed by forward selection with the rules of :mod:`jflex.gap._diagnose` (its
+ladder is climbed by forward selection with the rules of :func:`jflex.gap.forward_select` (its
 significance test, excess gap, shrink, held-out information criterion and minimum step shrink).
 
 Usage: jflex run gap_seed001 [configs/gap_seed001.yaml] [--out DIR]
@@ -46,8 +46,9 @@ import numpy as np  # noqa: E402
 
 import jflex  # noqa: E402
 from jflex.effects import FlexibleJoints  # noqa: E402
-from jflex.gap._diagnose import (  # noqa: E402
-    MIN_GAP, MIN_STEP_SHRINK, SIGNIFICANCE, _combine, _ic_delta, _mad_sigma, _rank, _significant, forward_select,
+from jflex.gap import (  # noqa: E402
+    MIN_GAP, MIN_STEP_SHRINK, SIGNIFICANCE, forward_select, gap_summary, ic_delta, is_significant, rank_entries,
+    robust_sigma,
 )
 from jflex.identify import Free, Log, ParameterSpec  # noqa: E402
 
@@ -233,7 +234,7 @@ def _channel_nrmse(r, chans, n):
 
 
 def _ev(chan_nrmse, n):
-    """The evaluation of one record as :mod:`jflex.gap._diagnose` keeps it: nrmse [%] over all
+    """The evaluation of one record as :func:`jflex.gap.forward_select` keeps it: nrmse [%] over all
     channels, per channel, and the effective sample count of its information criterion."""
     v = np.array(list(chan_nrmse.values()))
     return dict(nrmse=float(np.sqrt(np.mean(v**2))), channels=dict(chan_nrmse), neff=n * len(v) / 10.0)
@@ -369,14 +370,14 @@ def noise_floor(val, chans):
 
 
 def hf_floor(val, pred, chans):
-    """Cross-check of the floor without repeats, as :func:`jflex.gap._diagnose.noise_floor` does
+    """Cross-check of the floor without repeats, as :func:`jflex.gap.noise_floor` does
     for torque records: the robust spread of the residual's second difference over sqrt(6)."""
     per = {}
     for c in chans:
         o = CHANNELS[c][0]
         e = (pred[o] - np.asarray(val.meas[o])) / np.std(np.asarray(val.meas[o]))
         d2 = e[2:] - 2 * e[1:-1] + e[:-2]
-        per[c] = float(100 * _mad_sigma(d2) / np.sqrt(6))
+        per[c] = float(100 * robust_sigma(d2) / np.sqrt(6))
     return float(np.sqrt(np.mean(np.array(list(per.values())) ** 2))), per
 
 
@@ -413,9 +414,9 @@ def start_values(cfg, truth):
 
 
 def _entry(cand, ev, ev0, ev_cur, floor_d, sc, params):
-    gap, _, exc = _combine(ev, floor_d)
-    g0, _, exc0 = _combine(ev0, floor_d)
-    _, _, exc_cur = _combine(ev_cur, floor_d)
+    gap, _, exc = gap_summary(ev, floor_d)
+    g0, _, exc0 = gap_summary(ev0, floor_d)
+    _, _, exc_cur = gap_summary(ev_cur, floor_d)
     e = dict(EFFECTS[cand], step=cand, score=float(sc), gap_after=gap,
              shrink=float(np.clip(100 * (1 - exc / exc0), 0, 100)) if exc0 > 0 else 0.0,
              shrink_raw=float(100 * (1 - gap / g0)) if g0 > 0 else 0.0,
@@ -442,8 +443,8 @@ def ladder(cfg, recs, say=print):
     fl, fl_per = noise_floor(val, chans)
     hf, hf_per = hf_floor(val, pred0, chans)
     floor_d = {"validation": fl}
-    gap0, _, exc0 = _combine(ev0, floor_d)
-    significant = _significant(ev0, floor_d)
+    gap0, _, exc0 = gap_summary(ev0, floor_d)
+    significant = is_significant(ev0, floor_d)
     rungs = [dict(variant="F.L-R.H", added=None, selected=True, gap=gap0, excess=exc0, per_channel=ch0,
                   parameters={}, prediction=pred0, solver_steps=steps0, seconds=time.perf_counter() - t0)]
     say(f"gap_seed001: nominal F.L-R.H: validation gap {gap0:.2f} % (noise floor {fl:.2f} %), "
@@ -479,9 +480,9 @@ def ladder(cfg, recs, say=print):
     # significant; ladder.rank_always: false skips that (the null check needs only the test)
     for c in (cands if significant or cfg["ladder"].get("rank_always", True) else []):
         f = try_step((), {}, c)
-        sc = -_ic_delta(f["ev"], ev0, N_PARAMS[c])
+        sc = -ic_delta(f["ev"], ev0, N_PARAMS[c])
         ranking.append(_entry(c, f["ev"], ev0, ev0, floor_d, sc, f["params"]))
-    ranking = [ranking[i] for i in _rank(ranking)]
+    ranking = [ranking[i] for i in rank_entries(ranking)]
     # forward selection: the loop of jflex.gap.diagnose; a state is try_step's record (None: nominal)
 
     def add_step(state, c):  # (the module's refit() is the fit itself)
@@ -489,14 +490,14 @@ def ladder(cfg, recs, say=print):
         return f, f["ev"]
 
     def on_select(st):
-        say(f"gap_seed001: selected {st.cand} ({EFFECTS[st.cand]['effect']}): gap {_combine(st.ev, floor_d)[0]:.2f} %")
+        say(f"gap_seed001: selected {st.cand} ({EFFECTS[st.cand]['effect']}): gap {gap_summary(st.ev, floor_d)[0]:.2f} %")
 
     sel = forward_select(None, ev0, floor_d, cands, add_step, n_params=lambda c: N_PARAMS[c], max_effects=len(cands),
                          on_select=on_select)
     selected = [_entry(st.cand, st.ev, ev0, st.ev_before, floor_d, st.score, st.state["params"]) for st in sel.steps]
     steps_log = [dict(added=None, variant="F.L-R.H", gap=gap0, excess=exc0, per_dataset={"validation": gap0})]
     for st in sel.steps:
-        g, _, e = _combine(st.ev, floor_d)
+        g, _, e = gap_summary(st.ev, floor_d)
         steps_log.append(dict(added=st.cand, variant=variant_of(st.state["effects"]), gap=g, excess=e, per_dataset={"validation": g}))
     ev_cur = sel.ev
     rej = sel.rejected
@@ -516,19 +517,19 @@ def ladder(cfg, recs, say=print):
             chain.append((f, False))
             eff, vals = f["effects"], f["values"]
     for f, sel in chain:
-        g, _, e = _combine(f["ev"], floor_d)
+        g, _, e = gap_summary(f["ev"], floor_d)
         rungs.append(dict(variant=variant_of(f["effects"]), added=f["effects"][-1], selected=sel, gap=g, excess=e,
                           shrink=float(np.clip(100 * (1 - e / exc0), 0, 100)) if exc0 > 0 else 0.0,
                           per_channel=f["ev"]["validation"]["channels"], parameters=f["params"], prediction=f["pred"],
                           fit=dict(f["fit"]), solver_steps=f["solver_steps"]))
-    gap_after, _, exc_after = _combine(ev_cur, floor_d)
+    gap_after, _, exc_after = gap_summary(ev_cur, floor_d)
     diag = dict(
         case="seed 001 revolute-prismatic arm: data from F.L-F.H-F.J (simulated + noise), nominal F.L-R.H",
         gap_before=gap0, gap_after=gap_after, noise_floor=fl, noise_floor_per_dataset=floor_d,
         noise_floor_per_channel=fl_per, noise_floor_hf_estimate=hf, noise_floor_hf_per_channel=hf_per,
         excess_before=exc0, excess_after=exc_after,
         shrink=float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0,
-        significant=bool(significant), remaining_significant=bool(_significant(ev_cur, floor_d)),
+        significant=bool(significant), remaining_significant=bool(is_significant(ev_cur, floor_d)),
         significance_rule=f"gap > {SIGNIFICANCE} x noise floor + {MIN_GAP} %", stop_reason=stop_reason,
         where=where(val, pred0, chans, fl_per)[:40], ranking=ranking, selected=selected, steps=steps_log,
         parameters={k: v for r in rungs[1:] if r["selected"] for k, v in r["parameters"].items()},

@@ -10,7 +10,7 @@ Candidates, each one scale factor fitted on the training speeds by least squares
 then golden-section refinement; see :func:`fit` for why not gradients): ``joint_flexibility`` (bar-element pins with the paper's moduli times a
 scale), ``link_flexibility`` (every beam's E times a scale), ``damping`` (the modal damping ratio
 times a scale), ``payload`` (the main slider's lumped mass times a scale). They are ranked and
-forward-selected on the validation gap by the rules of :mod:`jflex.gap._diagnose`.
+forward-selected on the validation gap by the rules of :func:`jflex.gap.forward_select`.
 
 Usage: ``python experiments/gap_seed002.py [configs/gap_seed002.yaml] [--out DIR]`` or
 ``jflex run gap_seed002 [CONFIG] [--out DIR]``. Writes ``results.json``, ``diagnosis.json`` and
@@ -33,8 +33,8 @@ import numpy as np
 
 import jflex
 from jflex import fem
-from jflex.gap._diagnose import (MIN_GAP, SIGNIFICANCE, _combine, _ic_delta, _mean_of, _rank, _significant,
-                                forward_select, step_record)
+from jflex.gap import (MIN_GAP, SIGNIFICANCE, forward_select, gap_summary, ic_delta, is_significant, rank_entries,
+                       repeats_factor, step_record)
 
 NAME = "gap_seed002"
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -191,7 +191,7 @@ class Data:
         self.repeats = self.truth[None] + p["sigma"] * rng.standard_normal((p["repeats"], speeds.size))
         self.mean = self.repeats.mean(axis=0)
         # the data are the mean of R records: its noise is one record's over sqrt(R)
-        self.sigma_mean = self.repeats.std(axis=0, ddof=1) / _mean_of(self.repeats, self.mean)
+        self.sigma_mean = self.repeats.std(axis=0, ddof=1) / repeats_factor(self.repeats, self.mean)
         self.train = np.isin(speeds, p["train"])
         self.bands = {f"{b.min():.0f}-{b.max():.0f} spm": np.isin(speeds, b) for b in p["bands"]}
         # one pooled noise level for the weights: per-speed spreads from 4 records are themselves noisy
@@ -291,8 +291,8 @@ def where(data: Data, ev: dict, floor: dict) -> list:
 
 
 def _entry(effects, ev, ev0, floor, score, theta):
-    gap, _, exc = _combine(ev, floor)
-    g0, _, exc0 = _combine(ev0, floor)
+    gap, _, exc = gap_summary(ev, floor)
+    g0, _, exc0 = gap_summary(ev0, floor)
     shrink = 100.0 * (1 - exc / exc0) if exc0 > 0 else 0.0
     c = effects[-1]
     return dict(effect=c, joint=PLACE[c], score=float(score), gap_after=gap, shrink=float(np.clip(shrink, 0, 100)),
@@ -307,20 +307,20 @@ def diagnose(model: PressModel, data: Data, p: dict, say=print):
     curves = {"nominal": np.asarray(model.deviation((), jnp.zeros(0)))}
     ev0 = data.evaluate(curves["nominal"])
     floor = data.floor()
-    gap0, fl, exc0 = _combine(ev0, floor)
-    significant = _significant(ev0, floor)
+    gap0, fl, exc0 = gap_summary(ev0, floor)
+    significant = is_significant(ev0, floor)
     say(f"nominal (perfect joints): validation gap {gap0:.2f} % (noise floor {fl:.2f} %), significant: {significant}")
     ranking, fitted, grids = [], {}, {}
     # with nothing significant to explain, no candidate is refitted (each refit costs ~20 KED solves)
     for c in p["candidates"] if significant else ():
         th, dev, grid = fit(model, data, (c,), np.zeros(1), p["grid"], p["steps"])
         ev = data.evaluate(dev)
-        score = -_ic_delta(ev, ev0, 1)
+        score = -ic_delta(ev, ev0, 1)
         fitted[c] = ((c,), th, dev, ev)
         grids[c] = grid
         ranking.append(_entry((c,), ev, ev0, floor, score, th))
         say(f"  {c}: scale {np.exp(th[0]):.3f}, gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
-    order = _rank(ranking)
+    order = rank_entries(ranking)
     ranking = [ranking[i] for i in order]
     # forward selection: the loop of jflex.gap.diagnose; a state is (effects, theta, deviation)
 
@@ -330,7 +330,7 @@ def diagnose(model: PressModel, data: Data, p: dict, say=print):
         return (effects, th, dev), data.evaluate(dev)
 
     def on_select(st):
-        say(f"selected {st.cand}: gap {_combine(st.ev, floor)[0]:.2f} %")
+        say(f"selected {st.cand}: gap {gap_summary(st.ev, floor)[0]:.2f} %")
 
     sel = forward_select(((), np.zeros(0), curves["nominal"]), ev0, floor, p["candidates"], refit, n_params=lambda c: 1,
                          max_effects=p["max_effects"], first={c: (v[:3], v[3]) for c, v in fitted.items()},
@@ -346,12 +346,12 @@ def diagnose(model: PressModel, data: Data, p: dict, say=print):
         a, b = ranking[0], ranking[1]
         if abs(a["shrink"] - b["shrink"]) < 5.0:
             ambiguous.append(dict(effects=[a["effect"], b["effect"]], shrink=[a["shrink"], b["shrink"]]))
-    gap_after, _, exc_after = _combine(ev_cur, floor)
+    gap_after, _, exc_after = gap_summary(ev_cur, floor)
     result = dict(
         case="seed 002 press: BDC deviation vs speed (synthetic truth)", gap_before=gap0, gap_after=gap_after, noise_floor=fl,
         noise_floor_per_dataset=floor, excess_before=exc0, excess_after=exc_after,
         shrink=float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0,
-        significant=bool(significant), remaining_significant=bool(_significant(ev_cur, floor)),
+        significant=bool(significant), remaining_significant=bool(is_significant(ev_cur, floor)),
         where=where(data, ev0, floor), ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
         parameters={e: {"scale": float(np.exp(t)), "unit": UNIT[e]} for e, t in zip(state[0], state[1])},
         model_evaluations=model.evals, seconds=time.perf_counter() - t0,

@@ -294,7 +294,8 @@ def test_frf_joint_flexibility_found(tmp_path):
 def test_frf_noise_floor_of_averaged_repeats(tmp_path):
     # H is the mean of 3 repeats with ~1 % noise each: its floor is ~1 % / sqrt(3), not the
     # spread of one repeat (the old estimate, which hid small effects under the floor)
-    from jflex.gap._diagnose import Problem, noise_floor
+    from jflex.gap._problem import Problem
+    from jflex.gap import noise_floor
 
     folder = G.frf_case(tmp_path / "null", "arm3", [], seed=21)
     case = load_case(folder)
@@ -306,22 +307,23 @@ def test_frf_noise_floor_of_averaged_repeats(tmp_path):
 
 def _candidate_shrinks(folder, cands) -> dict:
     """Percentage of the nominal excess gap each candidate closes, refitted alone on the nominal."""
-    from jflex.gap._diagnose import Problem, _combine, noise_floor
+    from jflex.gap._problem import Problem
+    from jflex.gap import gap_summary, noise_floor
 
     case = load_case(folder)
     pb = Problem(case)
     nom = pb.nominal_state()
     ev0 = pb.evaluate(nom)
     floor = noise_floor(pb, ev0, case)
-    exc0 = _combine(ev0, floor)[2]
-    return {c: 100 * (1 - _combine(pb.evaluate(pb.add(nom, c)), floor)[2] / exc0) for c in cands}
+    exc0 = gap_summary(ev0, floor)[2]
+    return {c: 100 * (1 - gap_summary(pb.evaluate(pb.add(nom, c)), floor)[2] / exc0) for c in cands}
 
 
 def test_frf_fractional_damping_beats_its_rivals(tmp_path):
     # a fractional law planted at one joint: refitted at that joint it closes most of the excess
     # gap, more than the same law elsewhere or a hysteretic law there (the three closest rivals
     # of the bench case; the full diagnosis is the slow test below)
-    from jflex.gap._diagnose import Candidate
+    from jflex.gap._problem import Candidate
 
     folder = G.frf_case(tmp_path / "fd", "arm3", ["fractional_damping"], seed=504)
     truth = _truth(folder)["effects"][0]
@@ -342,7 +344,7 @@ def test_frf_link_flexibility_found(tmp_path):
     # Seeds that bend link2 (link1 of arm3 is 0.15 m long: its bending is the tilt of joint2,
     # a known confounded pair)
     # (small version: the truth and its closest rivals refitted, not the whole diagnosis)
-    from jflex.gap._diagnose import Candidate
+    from jflex.gap._problem import Candidate
 
     folder = G.frf_case(tmp_path / "lf", "arm3", ["link_flexibility"], seed=502 if SLOW else 22)
     truth = _truth(folder)["effects"][0]

@@ -95,7 +95,7 @@ def _make_case(folder: pathlib.Path, seed: int, extra_torque=None, angles_only=T
 
 def test_nominal_identification_recovers_planted_cad_error(tmp_path):
     folder, model = _make_case(tmp_path / "cad", seed=3, angles_only=False)
-    from jflex.gap._diagnose import Problem
+    from jflex.gap._problem import Problem
     from jflex.gap._case import load_case
 
     case = load_case(folder)

@@ -116,7 +116,7 @@ def test_tip_response_needs_tool_frame_and_train_split_is_not_fitted(tip_folder)
     with pytest.raises(jflex.ConfigError, match=r"case\.yaml: field 'tool_frame': .*datasets\[1\].*tip1\.npz"):
         load_case(tip_folder)
     # a tip record in the train split is validated but left out of the fit (scored on validation only)
-    from jflex.gap._diagnose import Problem
+    from jflex.gap._problem import Problem
 
     cfg["tool_frame"] = "tool"
     cfg["datasets"][1]["split"] = "train"

@@ -4,6 +4,23 @@ how far it shrinks once that effect is added and refitted, judged on held-out da
 from ._case import Case as Case, Dataset as Dataset, EFFECT_NAMES as EFFECT_NAMES, load_case as load_case
 from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose
 from ._effect_term import EffectCandidate as EffectCandidate
+from ._noise import noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
+from ._selection import (
+    EXPLAINED_SHRINK as EXPLAINED_SHRINK,
+    MIN_GAP as MIN_GAP,
+    MIN_NAMED_SHRINK as MIN_NAMED_SHRINK,
+    MIN_STEP_SHRINK as MIN_STEP_SHRINK,
+    SIGNIFICANCE as SIGNIFICANCE,
+    Selection as Selection,
+    Step as Step,
+    forward_select as forward_select,
+    gap_summary as gap_summary,
+    ic_delta as ic_delta,
+    is_significant as is_significant,
+    rank_entries as rank_entries,
+    step_record as step_record,
+    verdict as verdict,
+)
 from ._report import write_report as write_report
 from ._demo import demo as demo
 from ._bench import run_bench as run_bench

@@ -1,0 +1,487 @@
+"""The diagnosed problem: a case's data prepared once (torque sets with their processing, FRF,
+modal and output-error sets), the nominal identification (:meth:`Problem.nominal_state`), the
+candidate effects (:meth:`Problem.candidates`), a candidate's refit on the training data
+(:meth:`Problem.add`) and the evaluation of a model on the validation data (:meth:`Problem.evaluate`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ._case import Case
+from ._effect_term import EffectCandidate, EffectTerm
+from ._inertia import inertia_prior
+from . import _linear as L
+from . import _response as R
+from . import _torque as T
+
+TORQUE_EFFECTS = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
+                  "backlash", "payload", "sensor_delay")
+LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "hysteretic_damping",
+                  "fractional_damping", "payload")
+# pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
+CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
+                                     ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
+                                     ("coulomb_friction", "backlash"), ("coulomb_friction", "stribeck_friction"),
+                                     ("orthogonal_compliance", "link_flexibility"),
+                                     ("fractional_damping", "hysteretic_damping")]}
+DEFAULT_OPTIONS = {"inertia_prior": 1.0, "refit_inertia": True, "filter_cutoff_hz": "auto", "decimate": 1,
+                   "max_effects": 3}
+
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    """An effect placed at a joint (index) or link (index) or nowhere (None)."""
+
+    effect: str
+    joint: int | None = None
+
+    def label(self, names):
+        return self.effect if self.joint is None else f"{self.effect}@{names[self.joint]}"
+
+
+@dataclasses.dataclass
+class State:
+    """A model under diagnosis: torque terms and the linear structure with their fitted values."""
+
+    tfit: object | None
+    lm: object | None
+    x: np.ndarray | None
+    added: tuple = ()
+
+
+def _is_torque(d) -> bool:
+    return d.kind == "torque" or (d.kind == "response" and "q" in d.arrays)
+
+
+def _is_output_error(d) -> bool:
+    return d.kind == "response" and "q" not in d.arrays
+
+
+# ---------------------------------------------------------------------------------------------
+class Problem:
+    """Precomputed data of a case for repeated refits."""
+
+    def __init__(self, case: Case, candidates=()):
+        self.case = case
+        self.robot = case.robot
+        self.names = tuple(self.robot.joint_names)
+        self.n = self.robot.nq
+        # responses whose channels hold every model joint enter as equation-error (torque) sets
+        self.options = dict(DEFAULT_OPTIONS, **(getattr(case, "options", None) or {}))
+        proc = dict(cutoff_hz=self.options["filter_cutoff_hz"], decimate=int(self.options["decimate"]))
+        self.ttrain = [T.torque_set(self.robot, d, **proc) for d in case.split("train") if _is_torque(d)]
+        self.tval = [T.torque_set(self.robot, d, **proc) for d in case.split("validation") if _is_torque(d)]
+        # the nominal identification refits the CAD inertial parameters (prior toward CAD, within
+        # its tolerance) unless the case holds them fixed
+        self.inertia = (inertia_prior(self.robot, float(self.options["inertia_prior"]))
+                        if self.ttrain and self.options["refit_inertia"] else None)
+        self.ftrain = [d for d in case.datasets if d.split == "train" and d.kind in ("frf", "modal")]
+        self.fval = [d for d in case.datasets if d.split == "validation" and d.kind in ("frf", "modal")]
+        # the others are simulated under their applied torques and compared as output error, on
+        # validation only: a refit through the simulation would cost one nonlinear fit per candidate
+        self.rval = [R.response_set(self.robot, d, case.tool_frame) for d in case.split("validation") if _is_output_error(d)]
+        self.responses = [d for d in case.split("train") if _is_output_error(d)]
+        self.nominal = {(e["effect"], self.names.index(j)) for e in case.nominal_effects for j in e["joints"]}
+        # candidate effects given as jflex.effects effects (the user's own laws among them)
+        self.user = {}
+        for ec in candidates:
+            if not isinstance(ec, EffectCandidate):
+                raise TypeError(f"diagnose: candidates must be jflex.gap.EffectCandidate, got {type(ec).__name__}")
+            j = None if ec.joint is None else self.names.index(ec.joint) if ec.joint in self.names else None
+            if ec.joint is not None and j is None:
+                from .._errors import ParameterError
+
+                raise ParameterError(f"EffectCandidate '{ec.name}': joint '{ec.joint}' is not a model joint {list(self.names)}")
+            self.user[Candidate(ec.name, j)] = ec.bind(self.robot)
+        self.nominal_effects = case.nominal_effects
+        # rotor inertia [kg m^2] the case states (nominal rotor_inertia with a value): the motor
+        # side of a simulated spring when no torque training set fits it
+        self.rotor_nominal = np.zeros(self.n)
+        for e in case.nominal_effects:
+            if e["effect"] == "rotor_inertia" and "value" in e:
+                for j, v in zip(e["joints"], e["value"]):
+                    self.rotor_nominal[self.names.index(j)] = v
+
+    # --- nominal model -------------------------------------------------------------------------
+    def nominal_state(self) -> State:
+        terms, delay = [], 0.0
+        for e in self.nominal_effects:
+            if e["effect"] in TORQUE_EFFECTS and e["effect"] not in ("payload", "sensor_delay"):
+                for j in e["joints"]:
+                    h = {"stribeck_friction": T.STRIBECK_VS[2], "backlash": 0.01}.get(e["effect"])
+                    terms.append(T.Term(e["effect"], self.names.index(j), h))
+            elif e["effect"] == "payload":
+                terms.append(T.Term("payload", None))
+            elif e["effect"] == "sensor_delay":
+                delay = float(e.get("value", [0.0])[0])
+                terms.append(T.Term("sensor_delay", None, delay))
+        tfit = None
+        if self.ttrain:
+            # twice: the prior's weight is relative to the residual level of the fit itself
+            tfit = T.fit_terms(tuple(terms), delay, self.ttrain, self.inertia)
+            if self.inertia is not None:
+                self.inertia.sigma = T.with_inertia_sigma(tfit, self.ttrain)
+                tfit = T.fit_terms(tuple(terms), delay, self.ttrain, self.inertia)
+        lm = x = None
+        if self.ftrain or self.fval:
+            springs, x0 = [], []
+            for e in self.nominal_effects:
+                if e["effect"] == "joint_flexibility":
+                    law = "viscous"
+                    for j in e["joints"]:
+                        springs.append(L.Spring("joint", self.names.index(j), law=law))
+                    k = e.get("stiffness", np.full(len(e["joints"]), 1e5))
+                    c = e.get("damping", 1e-3 * k)
+                    x0.append((np.log(k), np.log(np.maximum(c, 1e-9))))
+            # hysteretic / fractional nominal laws switch the spring at that joint
+            laws = {}
+            for e in self.nominal_effects:
+                if e["effect"] in ("hysteretic_damping", "fractional_damping"):
+                    for j in e["joints"]:
+                        laws[self.names.index(j)] = "hysteretic" if e["effect"] == "hysteretic_damping" else "fractional"
+            springs = [dataclasses.replace(s, law=laws.get(s.where, s.law)) for s in springs]
+            ks = np.concatenate([a for a, _ in x0]) if x0 else np.zeros(0)
+            cs = np.concatenate([b for _, b in x0]) if x0 else np.zeros(0)
+            structure = L.LinearStructure(tuple(springs), payload=False)
+            lm = L.LinearModel(self.robot, structure, self.case.tool_frame)
+            x = np.concatenate([ks, cs])
+            if self.ftrain and len(springs):
+                x, _ = L.fit_linear(lm, x, self.ftrain)
+        return State(tfit, lm, x)
+
+    # --- candidates ----------------------------------------------------------------------------
+    def candidates(self) -> list[Candidate]:
+        out = []
+        nom = {e for e, _ in self.nominal}
+        if self.ttrain:
+            for eff in TORQUE_EFFECTS:
+                if eff in ("payload", "sensor_delay"):
+                    if eff not in nom:
+                        out.append(Candidate(eff, None))
+                    continue
+                for j in range(self.n):
+                    if (eff, j) in self.nominal:
+                        continue
+                    if eff == "coulomb_friction" and ("stribeck_friction", j) in self.nominal:
+                        continue
+                    out.append(Candidate(eff, j))
+        if self.ttrain:
+            out += list(self.user)
+        if self.ftrain:
+            flex = {s.where for s in self._nominal_springs()}
+            for j in range(self.n):
+                if j not in flex:
+                    out.append(Candidate("joint_flexibility", j))
+                out.append(Candidate("orthogonal_compliance", j))
+                out.append(Candidate("link_flexibility", j))
+                if j in flex:
+                    if ("hysteretic_damping", j) not in self.nominal:
+                        out.append(Candidate("hysteretic_damping", j))
+                    if ("fractional_damping", j) not in self.nominal:
+                        out.append(Candidate("fractional_damping", j))
+            if "payload" not in nom and not self.ttrain:
+                out.append(Candidate("payload", None))
+        return out
+
+    def _nominal_springs(self):
+        return [L.Spring("joint", self.names.index(j)) for e in self.nominal_effects
+                if e["effect"] == "joint_flexibility" for j in e["joints"]]
+
+    # --- refits --------------------------------------------------------------------------------
+    def add(self, state: State, cand: Candidate) -> State:
+        """Refit with ``cand`` added (warm start from ``state``)."""
+        tfit, lm, x = state.tfit, state.lm, state.x
+        if cand in self.user and self.ttrain:
+            tfit = T.fit_with(tfit.terms, tfit.delay, EffectTerm(self.user[cand], cand.joint), self.ttrain, self.inertia)
+        elif cand.effect in TORQUE_EFFECTS and self.ttrain:
+            if cand.effect == "sensor_delay":
+                base = tuple(t for t in tfit.terms if t.effect != "sensor_delay")
+                tfit = T.fit_with(base, 0.0, T.Term("sensor_delay", None), self.ttrain, self.inertia)
+            else:
+                tfit = T.fit_with(tfit.terms, tfit.delay, T.Term(cand.effect, cand.joint, T.STRIBECK_VS[2]), self.ttrain,
+                                  self.inertia)
+        if cand.effect in LINEAR_EFFECTS and self.ftrain and lm is not None:
+            lm, x = self._add_linear(lm, x, cand)
+        return State(tfit, lm, x, state.added + (cand,))
+
+    def _add_linear(self, lm, x, cand):
+        st = lm.structure
+        S = len(st.springs)
+        ks, cs = list(x[:S]), list(x[S:2 * S])
+        pay = list(x[2 * S:2 * S + 1]) if st.payload else []
+        cpl = list(x[2 * S + len(pay):])  # couplings of virtual pairs already in the model
+        springs = list(st.springs)
+        if cand.effect in ("hysteretic_damping", "fractional_damping"):
+            i = next(i for i, s in enumerate(springs) if s.kind == "joint" and s.where == cand.joint)
+            law = "hysteretic" if cand.effect == "hysteretic_damping" else "fractional"
+            tried = {}
+
+            def fit_alpha(a):
+                sp = list(springs)
+                sp[i] = dataclasses.replace(sp[i], law=law, alpha=round(float(a), 3))
+                lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+                lm2._cache = lm._cache  # same geometry and postures: the matrices carry over
+                x2 = np.array(x, float)
+                w = 2 * np.pi * self._ref_freq()
+                k, c = np.exp(x2[i]), np.exp(x2[S + i])
+                # the same loss at the reference frequency (eta = w c / k, c_frac = w c / w^alpha) is
+                # only a guess (the spring's own mode may lie elsewhere): scan the new damping
+                # coefficient around it, then fit everything from the best (no peaks phase: the
+                # picked peaks' half-power damping is what a damping law must not chase)
+                c0 = np.log(w * c / k) if law == "hysteretic" else np.log(w * c / w**a)
+                best0 = None
+                for dc in np.arange(-3.0, 3.01, 0.5):
+                    x2[S + i] = c0 + dc
+                    r = L.residual(lm2, x2, self.ftrain, peaks=False)
+                    if best0 is None or r @ r < best0[0]:
+                        best0 = (float(r @ r), x2.copy())
+                xf, cost = L.fit_linear(lm2, best0[1], self.ftrain, peaks_first=False)
+                tried[float(a)] = (cost, lm2, xf)
+                return cost
+
+            if law == "hysteretic":
+                fit_alpha(0.5)
+            else:
+                for a in L.ALPHAS:
+                    fit_alpha(a)
+                # refine the order: steps of 0.1, 0.05 and 0.025 either side of the best order tried,
+                # then the vertex of a parabola through the best and its (now close) neighbours (one
+                # parabola through the wide grid stopped 0.07 off the order)
+                best_a = lambda: min(tried, key=lambda a: tried[a][0])
+                for h in (0.1, 0.05, 0.025):
+                    a0 = best_a()
+                    for a_new in (a0 - h, a0 + h):
+                        a_new = round(float(np.clip(a_new, 0.1, 0.95)), 3)
+                        if a_new not in tried:
+                            fit_alpha(a_new)
+                al = sorted(tried)
+                kb = min(max(al.index(best_a()), 1), len(al) - 2)
+                xa = np.array(al[kb - 1:kb + 2])
+                ya = np.log(np.array([tried[a][0] for a in xa]))
+                cpar = np.polyfit(xa - xa[1], ya, 2)
+                if cpar[0] > 0:
+                    a_new = round(float(np.clip(xa[1] - cpar[1] / (2 * cpar[0]), xa[0], xa[2])), 3)
+                    if a_new not in tried:
+                        fit_alpha(a_new)
+            cost, lm2, xf = min(tried.values(), key=lambda t: t[0])
+            return lm2, xf
+        if cand.effect == "payload":
+            st2 = L.LinearStructure(tuple(springs), True)
+            lm2 = L.LinearModel(self.robot, st2, self.case.tool_frame)
+            xs = [np.concatenate([ks, cs, [np.log(m)], cpl]) for m in (0.1, 1.0, 10.0)]
+            xf, _ = L.fit_linear(lm2, xs[0], self.ftrain, starts=xs[1:])
+            return lm2, xf
+        if cand.effect == "joint_flexibility":
+            new = [L.Spring("joint", cand.joint)]
+        elif cand.effect == "orthogonal_compliance":
+            # a bearing's tilt stiffness: a full 2x2 (coupled) stiffness about the two axes
+            new = [L.Spring("orth", cand.joint, 0), L.Spring("orth", cand.joint, 1, coupled=True)]
+        else:
+            new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1, coupled=True)]
+        sp = springs + new
+        lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+        # starting stiffnesses: the new spring(s) alone would put a mode at f_t; f_t is scanned over a
+        # log grid from below the measured band to well above it (a compliance whose modes lie
+        # above the band shows only as a posture-dependent static softening), both springs of a
+        # pair together and each alone stiff, keeping the starts with the lowest misfit. (One start
+        # at the frequency of the largest misfit put link modes far below the band, from where the
+        # bounded fit could not return.)
+        P = lm2.mats(self._ref_posture())
+        f_lo, f_hi = self._freq_band()
+        targets = list(np.geomspace(f_lo, 3.0 * f_hi, 12)) + self._unmatched_freqs(lm, x)[:1]
+        meff = [max(P.M[S + s, S + s], 1e-9) for s in range(len(new))]
+
+        def start(fts):
+            nk = [np.log((2 * np.pi * ft) ** 2 * m) for ft, m in zip(fts, meff)]
+            nc = [np.log(2 * 0.02 * np.sqrt(np.exp(k) * m)) for k, m in zip(nk, meff)]
+            return np.concatenate([ks, nk, cs, nc, pay, cpl, np.zeros(len(new) - 1)])
+
+        grid = [[ft] * len(new) for ft in targets]
+        if len(new) == 2:
+            grid += [[ft, 10 * f_hi] for ft in targets] + [[10 * f_hi, ft] for ft in targets]
+        scored = []
+        for fts in grid:
+            xs = start(fts)
+            r = L.residual(lm2, xs, self.ftrain, peaks=False)
+            scored.append((float(r @ r), len(scored), xs))
+        scored.sort(key=lambda t: t[:2])
+        starts = [t[2] for t in scored[:2]]
+        # and the new modes near the measured mode the model misses most (where the nominal fit is
+        # far off, the grid's misfit says little: a peaks phase first sorts the modes out)
+        P0 = P.M[:S, :S]
+        for ft in self._unmatched_freqs(lm, x)[:1]:
+            for scale in (0.6, 1.6):
+                nk, nc = [], []
+                for s in range(len(new)):
+                    ii = S + s
+                    me = max(P.M[ii, ii] - P.M[ii, :S] @ np.linalg.solve(P0, P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
+                    k = scale * (2 * np.pi * ft) ** 2 * me * (1.0 + 0.5 * s)
+                    nk.append(np.log(k))
+                    nc.append(np.log(2 * 0.02 * np.sqrt(k * me)))
+                starts.append(np.concatenate([ks, nk, cs, nc, pay, cpl, np.zeros(len(new) - 1)]))
+        # from each start: first the new stiffness(es) alone, the nominal springs and the new
+        # damping held (freed here, the damping of a misplaced new mode ran to zero, hiding the
+        # mode between the fitted frequencies); then everything
+        Sn = len(sp)
+        free = np.zeros(len(starts[0]), bool)
+        free[S:Sn] = True
+        # a new pair's coupling is held at zero from every start and freed once, from the best
+        # (the uncoupled fit puts the pair's modes in place; the coupling then turns its axes)
+        nc_new = len(starts[0]) - 2 * Sn - len(pay) - len(cpl)
+        held = np.ones(len(starts[0]), bool)
+        held[len(held) - nc_new:] = False
+        best = None
+        for x0 in starts:
+            x1, _ = L.fit_linear(lm2, x0, self.ftrain, free=free)
+            xf, cost = L.fit_linear(lm2, x1, self.ftrain, free=held, peaks_first=False)
+            if best is None or cost < best[0]:
+                best = (cost, xf)
+        if nc_new:
+            best = L.fit_linear(lm2, best[1], self.ftrain, peaks_first=False)[::-1]
+        return lm2, best[1]
+
+    def _ref_posture(self):
+        return self.ftrain[0].arrays["q0"]
+
+    def _freq_band(self):
+        fs = []
+        for d in self.ftrain:
+            fs += list(np.asarray(d.arrays["freq"], float))
+        return (float(min(fs)), float(max(fs))) if fs else (1.0, 100.0)
+
+    def _ref_freq(self):
+        fs = []
+        for d in self.ftrain:
+            a = d.arrays
+            if d.kind == "modal":
+                fs += list(a["freq"])
+            else:
+                fs.append(a["freq"][np.argmax(np.abs(a["H"]).sum(axis=(1, 2)))])
+        return float(np.median(fs)) if fs else 10.0
+
+    def _unmatched_freqs(self, lm, x):
+        out = []
+        for d in self.ftrain:
+            a = d.arrays
+            if d.kind == "modal":
+                f, _ = lm.modes(x, a["q0"])
+                _, rel = L.match_modes(f, a["freq"])
+                out += [float(fm) for fm, r in zip(a["freq"], rel) if abs(r) > 0.05]
+            else:
+                Hm = lm.frf(x, a["q0"], a["freq"])
+                e = np.abs(Hm - a["H"]).sum(axis=(1, 2))
+                out.append(float(a["freq"][np.argmax(e)]))
+        return out
+
+    # --- simulation of output-error sets -----------------------------------------------------------
+    def sim_springs(self, state: State) -> dict:
+        """``{joint: (k, c)}`` of the joint springs a tip simulation holds: those of the linear
+        model (fitted on FRF/modal data), else the stiffness/damping the case declares for its
+        nominal flexible joints. A hysteretic or fractional law enters as the viscous damping (and
+        stiffness) with the same complex stiffness at the reference frequency (the median measured
+        mode): a time simulation needs a causal law of fixed structure."""
+        out = {}
+        if state.lm is not None:
+            sp = state.lm.structure.springs
+            S = len(sp)
+            w = 2 * np.pi * (self._ref_freq() if self.ftrain else 10.0)
+            for i, s in enumerate(sp):
+                if s.kind != "joint":
+                    continue
+                k, v = float(np.exp(state.x[i])), float(np.exp(state.x[S + i]))
+                if s.law == "hysteretic":
+                    c = v * k / w
+                elif s.law == "fractional":
+                    c = v * w ** (s.alpha - 1) * np.sin(s.alpha * np.pi / 2)
+                    k = k + v * w**s.alpha * np.cos(s.alpha * np.pi / 2)
+                else:
+                    c = v
+                out[s.where] = (k, c)
+            return out
+        for e in self.nominal_effects:
+            if e["effect"] == "joint_flexibility" and "stiffness" in e:
+                c = e.get("damping", 1e-3 * e["stiffness"])
+                for j, kj, cj in zip(e["joints"], e["stiffness"], c):
+                    if kj > 0:
+                        out[self.names.index(j)] = (float(kj), float(cj))
+        return out
+
+    def simulation_model(self, state: State):
+        """The model a tip (output-error) set is simulated with (:func:`._response.simulation_model`);
+        rotor inertia from the nominal ``value`` when no torque training set fits it."""
+        return R.simulation_model(self.robot, state.tfit, self.sim_springs(state), None if self.ttrain else self.rotor_nominal)
+
+    # --- evaluation ----------------------------------------------------------------------------
+    def evaluate(self, state: State, sets="validation") -> dict:
+        """Per data set: nrmse [%], per channel [%], mse and effective sample count."""
+        tsets = self.tval if sets == "validation" else self.ttrain
+        fsets = self.fval if sets == "validation" else self.ftrain
+        out = {}
+        if sets == "validation" and self.rval:
+            model = self.simulation_model(state)
+            for s in self.rval:
+                e, failed = R.residual(model, s)
+                ch = np.sqrt(np.mean(e**2, axis=0)) * 100
+                out[s.name] = dict(kind="response", nrmse=float(np.sqrt(np.mean(e**2)) * 100),
+                                   channels={c: float(v) for c, v in zip(s.channels, ch)}, neff=e.size / 10.0,
+                                   resid=e, failed=failed, samples=len(e))
+        for s in tsets:
+            pred = T.predict(state.tfit, s)
+            e = (pred - s.tau) / s.scale
+            ch = np.sqrt(np.mean(e**2, axis=0)) * 100
+            out[s.name] = dict(kind="torque", nrmse=float(np.sqrt(np.mean(e**2)) * 100),
+                               channels={self.names[j]: float(ch[j]) for j in range(self.n)},
+                               neff=e.size / 10.0, resid=e)
+        for d in fsets:
+            a = d.arrays
+            if d.kind == "frf":
+                Hm = state.lm.frf(state.x, a["q0"], a["freq"]) if state.lm is not None else np.zeros_like(a["H"])
+                Hm = np.where(np.isfinite(Hm), Hm, 0.0)
+                err = Hm - a["H"]
+                ok = L.frf_entries(a["H"])
+                tot = np.sqrt(np.sum(np.abs(err[:, ok]) ** 2) / np.sum(np.abs(a["H"][:, ok]) ** 2)) * 100
+                s = L.frf_scale(a["H"])
+                ch = {f"H_{'xyz'[i]}{'xyz'[j]}": float(np.sqrt(np.mean(np.abs(err[:, i, j]) ** 2)) / s[i, j] * 100)
+                      for i in range(3) for j in range(3) if ok[i, j]}
+                out[d.name] = dict(kind="frf", nrmse=float(tot), channels=ch, neff=err[:, ok].size / 4.0, err=err, Hm=Hm)
+            else:
+                if state.lm is None:
+                    ef = np.ones(len(a["freq"]))
+                    ez = np.zeros_like(ef)
+                    idx, f, z = np.full(len(ef), -1), np.zeros(0), np.zeros(0)
+                else:
+                    ef, ez, idx, f, z = L.modal_errors(state.lm, state.x, a)
+                    # a model without valid modes (non-physical mass matrix) misses every mode
+                    ef = np.where(np.isfinite(ef), ef, 1.0)
+                    ez = np.where(np.isfinite(ez), ez, 0.0)
+                tot = np.sqrt(np.mean(ef**2) + np.mean((L.DAMPING_WEIGHT * ez) ** 2)) * 100
+                ch = {f"mode{k + 1}@{a['freq'][k]:.1f}Hz": float(abs(ef[k]) * 100) for k in range(len(ef))}
+                out[d.name] = dict(kind="modal", nrmse=float(tot), channels=ch, neff=float(len(ef)), ef=ef, ez=ez,
+                                   idx=idx, f_model=f, z_model=z)
+        return out
+
+
+def parameters(pb: Problem, st: State) -> dict:
+    out = {}
+    if st.tfit is not None:
+        out["torque"] = T.term_parameters(st.tfit, pb.names)
+    if st.lm is not None:
+        sp = st.lm.structure.springs
+        S = len(sp)
+        lin = {}
+        for i, s in enumerate(sp):
+            nm = {"joint": pb.names[s.where], "orth": f"{pb.names[s.where]}_orth_{'ab'[s.axis]}",
+                  "link": f"{pb.robot.link_names[s.where]}_bend_{'ab'[s.axis]}"}[s.kind]
+            lin[nm] = {"stiffness [N m/rad]": float(np.exp(st.x[i])), "law": s.law,
+                       {"viscous": "damping [N m s/rad]", "hysteretic": "loss factor eta",
+                        "fractional": f"c [N m s^{s.alpha}/rad]"}[s.law]: float(np.exp(st.x[S + i]))}
+        if st.lm.structure.payload:
+            lin["payload"] = {"mass [kg]": float(np.exp(st.x[2 * S]))}
+        for (a, b), r in zip(st.lm.pairs, st.lm.coupling(st.x)):
+            nm = {"orth": f"{pb.names[sp[b].where]}_orth", "link": f"{pb.robot.link_names[sp[b].where]}_bend"}[sp[b].kind]
+            lin[nm + "_coupling"] = {"r = k_ab / sqrt(k_a k_b)": float(r)}
+        out["linear"] = lin
+    return out

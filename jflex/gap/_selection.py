@@ -1,0 +1,191 @@
+"""Selection on held-out data: the gap measures (gap, floor, excess), significance, the
+information criterion, the ranking of candidates, forward selection, and the verdict. The
+rules are public so that experiments with model families of their own select by the same rules
+as :func:`jflex.gap.diagnose`."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+SIGNIFICANCE = 1.2  # a gap is significant when nrmse > 1.2 x its noise floor (+ MIN_GAP)
+MIN_GAP = 0.2  # [%] below this a gap is never significant
+MIN_STEP_SHRINK = 10.0  # [%] of the current excess an added effect must close to be selected
+MIN_NAMED_SHRINK = 50.0  # [%] of the nominal excess the first effect must close to be named at all
+EXPLAINED_SHRINK = 80.0  # [%] of the nominal excess closed in all for the verdict 'explained'
+
+
+def gap_summary(ev, floor):
+    names = list(ev)
+    g = np.array([ev[k]["nrmse"] for k in names])
+    f = np.array([floor[k] for k in names])
+    gap = float(np.sqrt(np.mean(g**2)))
+    fl = float(np.sqrt(np.mean(f**2)))
+    exc = float(np.sqrt(np.mean(np.maximum(g**2 - f**2, 0.0))))
+    return gap, fl, exc
+
+
+def is_significant(ev, floor):
+    return any(ev[k]["nrmse"] > SIGNIFICANCE * floor[k] + MIN_GAP for k in ev)
+
+
+def ic_delta(ev_new, ev_old, p_new):
+    """Held-out information criterion change (BIC form): sum_d Neff_d ln(mse_new / mse_old) + p ln(N)."""
+    d = 0.0
+    ntot = 0.0
+    for k in ev_new:
+        ne = ev_new[k]["neff"]
+        ntot += ne
+        d += ne * np.log(max(ev_new[k]["nrmse"], 1e-9) ** 2 / max(ev_old[k]["nrmse"], 1e-9) ** 2)
+    return d + p_new * np.log(max(ntot, 2.0))
+
+
+NESTED = {"stribeck_friction": "coulomb_friction"}  # complex -> the simpler effect it contains
+PARSIMONY = 5.0  # [%] a nested simpler effect within this shrink of the richer one ranks first
+
+
+def rank_entries(entries) -> list[int]:
+    """Order by the held-out shrink, then the criterion; a simpler nested effect at the same place
+    that closes nearly as much (within PARSIMONY points of shrink) goes first."""
+    # the held-out gap closed decides (rounded to a point, so noise-level differences tie), the
+    # information criterion breaks ties
+    order = sorted(range(len(entries)), key=lambda i: (-round(entries[i]["shrink"]), -entries[i]["score"]))
+    changed = True
+    while changed:
+        changed = False
+        for a in range(len(order)):
+            ea = entries[order[a]]
+            simple = NESTED.get(ea["effect"])
+            if simple is None:
+                continue
+            for b in range(a + 1, len(order)):
+                eb = entries[order[b]]
+                if eb["effect"] == simple and eb["joint"] == ea["joint"] and eb["shrink"] >= ea["shrink"] - PARSIMONY:
+                    order.insert(a, order.pop(b))
+                    changed = True
+                    break
+            if changed:
+                break
+    return order
+
+
+@dataclasses.dataclass
+class Step:
+    """One forward-selection step: ``cand`` added to the model before it (``ev_before``)."""
+
+    cand: object
+    state: object
+    ev: dict
+    ev_before: dict
+    score: float  # held-out information-criterion gain (-ic_delta against the model before)
+    step_shrink: float  # % of the excess before this step that it closed
+
+
+@dataclasses.dataclass
+class Selection:
+    """Result of :func:`forward_select`: the steps taken, the final model and why it stopped:
+    ``"not significant"`` (nothing to explain), ``"max effects"``, ``"no candidate"``,
+    ``"too small"`` (``rejected``, the best next step, closes < MIN_STEP_SHRINK % of the excess or
+    does not pay its parameters) or ``"within noise"`` (what remains is not significant)."""
+
+    steps: list
+    state: object
+    ev: dict
+    stop: str
+    rejected: Step | None = None
+
+
+def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
+                   simpler=None, first=None, on_select=None) -> Selection:
+    """Forward selection on held-out data, the rules of :func:`diagnose`: each round refits every
+    candidate not yet added on top of the current model, takes the one closing the most of the
+    current excess gap (rounded to a point, so that noise-level differences tie; the information
+    criterion breaks ties), and adds it only when it pays its parameters (held-out BIC) and closes
+    at least ``MIN_STEP_SHRINK`` % of the current excess; it stops once the gap is within noise.
+
+    **Arguments:**
+
+    - ``state0``, ``ev0``: the nominal model (opaque to this loop) and its validation evaluation
+      (``{name: {"nrmse", "neff", ...}}``); ``floor``: noise floor per validation set.
+    - ``candidates``: a list, or ``callable(state, round) -> list`` for a pool that changes with the model.
+    - ``refit(state, cand) -> (new_state, ev)``: ``cand`` added to ``state``, refitted on training
+      data and evaluated on validation data (the caller caches where it can).
+    - ``n_params(cand)``: parameters the candidate adds (the criterion's penalty).
+    - ``simpler(rich, simple) -> bool``: optional; a simpler effect nested in a richer one at the
+      same place wins when it closes within ``PARSIMONY`` points of it.
+    - ``first``: optional ``{cand: (state, ev)}`` of first-round refits already made.
+    - ``on_select(step)``: optional callback after each selected step.
+    """
+    if not is_significant(ev0, floor):
+        return Selection([], state0, ev0, "not significant")
+    steps, state, ev_cur, chosen = [], state0, ev0, []
+    while True:
+        if len(steps) >= max_effects:
+            return Selection(steps, state, ev_cur, "max effects")
+        _, _, exc_cur = gap_summary(ev_cur, floor)
+        pool = candidates(state, len(steps)) if callable(candidates) else candidates
+        best = None
+        for c in pool:
+            if c in chosen:
+                continue
+            st, ev = first[c] if (first is not None and not steps and c in first) else refit(state, c)
+            score = -ic_delta(ev, ev_cur, n_params(c))
+            _, _, exc = gap_summary(ev, floor)
+            step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
+            key = (round(step_shrink), score)
+            if simpler is not None and best is not None:
+                if simpler(best[1].cand, c) and step_shrink >= best[1].step_shrink - PARSIMONY:
+                    key = (best[0][0], best[0][1] + 1e-9, 1)  # the simpler nested effect wins a near tie
+                elif simpler(c, best[1].cand) and best[1].step_shrink >= step_shrink - PARSIMONY:
+                    key = (-np.inf, -np.inf)
+            if best is None or key > best[0]:
+                best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink)))
+        if best is None:
+            return Selection(steps, state, ev_cur, "no candidate")
+        step = best[1]
+        if step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK:
+            return Selection(steps, state, ev_cur, "too small", step)
+        steps.append(step)
+        chosen.append(step.cand)
+        state, ev_cur = step.state, step.ev
+        if on_select is not None:
+            on_select(step)
+        if not is_significant(ev_cur, floor):
+            return Selection(steps, state, ev_cur, "within noise")
+
+
+def step_record(added, ev, floor) -> dict:
+    """The ``steps`` entry of a diagnosis: the gap after ``added`` (None: nominal)."""
+    g, _, e = gap_summary(ev, floor)
+    return dict(added=added, gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()})
+
+
+def verdict(significant: bool, remaining: bool, named: bool, shrink: float) -> str:
+    """``within_noise`` (no significant gap), ``explained`` (the named effects leave a gap within
+    noise or close EXPLAINED_SHRINK % of the excess), ``partly_explained`` (they close at least
+    MIN_NAMED_SHRINK %), else ``unexplained``."""
+    if not significant:
+        return "within_noise"
+    if named and (not remaining or shrink >= EXPLAINED_SHRINK):
+        return "explained"
+    if named and shrink >= MIN_NAMED_SHRINK:
+        return "partly_explained"
+    return "unexplained"
+
+
+def stop_reason(sel: Selection, names) -> str:
+    """Why the search stopped, in words (the report's and diagnosis.json's ``stop_reason``)."""
+    best = sel.rejected.cand.label(names) if sel.rejected is not None else None
+    why = {
+        "not significant": "the nominal gap is within the noise floor: nothing to explain",
+        "within noise": "what remains is within the noise floor",
+        "max effects": "the most effects to add (max_effects) were added",
+        "no candidate": "no candidate effect applies to these data",
+        "too small": f"the best next candidate ({best}) closes less than {MIN_STEP_SHRINK:.0f} % of the remaining "
+                     "excess or does not pay for its parameters on held-out data",
+        "weak": f"the best candidate ({best}) closes only {sel.rejected.step_shrink:.0f} % of the excess gap "
+                f"(less than {MIN_NAMED_SHRINK:.0f} %): no effect of the library explains the gap"
+                if sel.rejected is not None else "",
+    }
+    return why.get(sel.stop, sel.stop)
