@@ -9,23 +9,17 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
+import re
 
 import numpy as np
 
 from .._config import load_robot
 from .._errors import ConfigError, DataError, JFlexError
 from .._runs import load_yaml
+from .._schema import validate
+from ._schema import EFFECT_NAMES, EFFECT_VALUES, FORMATS, KINDS, SPLITS, CaseSpec
 
-KINDS = ("torque", "frf", "modal", "response")
-SPLITS = ("train", "validation")
-
-# Every candidate name of the library (issue 6); nominal effects are named from the same list.
-EFFECT_NAMES = (
-    "joint_flexibility", "link_flexibility", "viscous_friction", "coulomb_friction", "stribeck_friction",
-    "gravity_compensator", "payload", "rotor_inertia", "orthogonal_compliance", "fractional_damping",
-    "hysteretic_damping", "backlash", "sensor_delay",
-)
-_NOMINAL_EXTRA = ("stiffness", "damping", "value")
+__all__ = ["Case", "Dataset", "load_case", "case_path", "EFFECT_NAMES", "KINDS", "SPLITS"]
 
 
 @dataclasses.dataclass
@@ -58,6 +52,7 @@ class Case:
     options: dict
 
     def split(self, split: str, kind: str | None = None) -> list[Dataset]:
+        """The data sets of ``split`` (``train``/``validation``), of ``kind`` if given."""
         return [d for d in self.datasets if d.split == split and (kind is None or d.kind == kind)]
 
 
@@ -70,6 +65,8 @@ def _resolve_joints(spec, robot, file, field) -> tuple[str, ...]:
     if spec is None or spec == "all":
         return names
     items = [spec] if isinstance(spec, (str, int)) else list(spec)
+    if "all" in items:
+        raise _err(file, field, "'all' stands alone, not in a list")
     out = []
     for j in items:
         if isinstance(j, int) and not isinstance(j, bool):
@@ -334,40 +331,92 @@ def _response_motion(t, tau, y, ch, path, robot):
 
 
 _LOADERS = {"torque": _torque, "frf": _frf, "modal": _modal, "response": _response}
+_CONFIG_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
 
-def load_case(path) -> Case:
+def case_path(base: pathlib.Path, rel: str, field: str, case_file, allow_outside: bool = False) -> pathlib.Path:
+    """``rel`` (a path case.yaml gives in ``field``) resolved against the case folder ``base``.
+
+    Unless ``allow_outside``, an absolute path and one that leaves the folder (``..``, or a
+    symbolic link pointing out, resolved first) raise :class:`ConfigError` naming the field; the
+    file is not opened.
+    """
+    p = pathlib.Path(rel)
+    if allow_outside:
+        return base / p
+    hint = "case files lie inside the case folder (pass allow_outside=True, or --allow-outside to jflex diagnose, to read it)"
+    if p.is_absolute() or p.drive:
+        raise _err(case_file, field, f"absolute path {rel!r}: {hint}")
+    root = base.resolve()
+    if not (base / p).resolve().is_relative_to(root):
+        raise _err(case_file, field, f"{rel!r} resolves outside the case folder: {hint}")
+    return base / p
+
+
+def _load_robot(spec: str, base, file, allow_outside):
+    if pathlib.PurePath(spec).suffix.lower() in (".urdf", ".yaml", ".yml"):
+        rp = case_path(base, spec, "robot", file, allow_outside)
+        target = str(rp)
+    elif _CONFIG_NAME.match(spec):
+        target = spec
+    else:
+        raise _err(file, "robot", f"expected a .urdf/.yaml file or a config name such as panda, got {spec!r}")
+    try:
+        return load_robot(target)
+    except JFlexError as exc:
+        raise ConfigError(f"{file}: field 'robot': {exc}") from None
+
+
+def _nominal(specs, robot, file) -> list[dict]:
+    nominal, seen = [], {}
+    for i, e in enumerate(specs):
+        fld = f"nominal_effects[{i}]"
+        joints = _resolve_joints(e.joint, robot, file, fld + ".joint")
+        for j in joints:
+            if (e.effect, j) in seen:
+                raise _err(file, fld + ".joint", f"effect {e.effect!r} at joint {j!r} is already given by "
+                           f"{seen[(e.effect, j)]}; give each effect once per joint")
+            seen[(e.effect, j)] = fld
+        d = {"effect": e.effect, "joints": joints}
+        for k in EFFECT_VALUES.get(e.effect, ()):
+            v = getattr(e, k)
+            if v is None:
+                continue
+            if len(v) not in (1, len(joints)):
+                raise _err(file, f"{fld}.{k}", f"expected a number or {len(joints)} numbers (one per joint "
+                           f"{list(joints)}), got {len(v)}")
+            d[k] = np.broadcast_to(np.asarray(v, dtype=float), (len(joints),)).copy()
+        nominal.append(d)
+    return nominal
+
+
+def load_case(path, *, allow_outside: bool = False) -> Case:
     """Read and validate a case folder (or its ``case.yaml``).
 
-    **Arguments:** ``path``: the folder holding ``case.yaml``, or the YAML file itself.
+    **Arguments:**
+
+    - ``path``: the folder holding ``case.yaml``, or the YAML file itself.
+    - ``allow_outside``: let ``robot``, ``robot_inertia`` and data ``file`` paths leave the case
+      folder (absolute paths, ``..``); off by default, so a case reads only its own files.
 
     **Returns:** a :class:`Case`. Raises :class:`jflex.ConfigError` / :class:`jflex.DataError`
-    naming the file and field of the first problem found.
+    naming the file and field of the first problem found. The schema of ``case.yaml`` is
+    :class:`jflex.gap._schema.CaseSpec` (the table in ``docs/case_format.md``).
     """
+    from ._csv import csv_arrays
+    from ._uff import uff_arrays
+
     p = pathlib.Path(path)
     file = p / "case.yaml" if p.is_dir() else p
     if not file.is_file():
         raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
-    cfg = load_yaml(file)
+    spec = validate(CaseSpec, load_yaml(file), file)
     base = file.parent
-    known = {"robot", "robot_inertia", "tool_frame", "nominal_effects", "datasets", "noise", "options", "name", "notes"}
-    for k in cfg:
-        if k not in known:
-            raise _err(file, k, f"unknown field; known fields: {sorted(known)}")
-    if "robot" not in cfg:
-        raise _err(file, "robot", "missing (a URDF file, a robot YAML or a config name such as kuka_kr90)")
-    spec = cfg["robot"]
-    if not isinstance(spec, str):
-        raise _err(file, "robot", f"expected a file name or robot name, got {spec!r}")
-    rp = base / spec
-    try:
-        robot = load_robot(str(rp) if rp.suffix.lower() in (".urdf", ".yaml", ".yml") else spec)
-    except JFlexError as exc:
-        raise ConfigError(f"{file}: field 'robot': {exc}") from None
-    if "robot_inertia" in cfg:
+    robot = _load_robot(spec.robot, base, file, allow_outside)
+    if spec.robot_inertia is not None:
         # link parameters realised from identified base parameters need not be physically
         # consistent per link (only their combinations are identified): taken as they are
-        ip = base / str(cfg["robot_inertia"])
+        ip = case_path(base, spec.robot_inertia, "robot_inertia", file, allow_outside)
         arr = _load_npz(ip, "robot_inertia", file)
         if "inertia" not in arr:
             raise DataError(f"{ip}: field 'inertia': missing ((n, 10) link parameters in Pinocchio's order)")
@@ -375,57 +424,31 @@ def load_case(path) -> Case:
         if P.shape != (robot.nq, 10):
             raise DataError(f"{ip}: field 'inertia': expected shape ({robot.nq}, 10), got {P.shape}")
         robot = robot.replace(inertia=P)
-    tool = cfg.get("tool_frame")
+    tool = spec.tool_frame
     if tool is not None:
         try:
             robot.frame_index(tool)
         except JFlexError:
             raise _err(file, "tool_frame", f"unknown frame {tool!r}; frames: {list(robot.link_names) + list(robot.frame_names)}") from None
-    nominal = []
-    for i, e in enumerate(cfg.get("nominal_effects") or []):
-        fld = f"nominal_effects[{i}]"
-        if not isinstance(e, dict) or "effect" not in e:
-            raise _err(file, fld, "expected a mapping with 'effect' (and 'joint' where it applies)")
-        if e["effect"] not in EFFECT_NAMES:
-            raise _err(file, fld + ".effect", f"unknown effect {e['effect']!r}; known: {list(EFFECT_NAMES)}")
-        bad = set(e) - {"effect", "joint", *_NOMINAL_EXTRA}
-        if bad:
-            raise _err(file, fld, f"unknown keys {sorted(bad)}; allowed: effect, joint, {', '.join(_NOMINAL_EXTRA)}")
-        joints = _resolve_joints(e.get("joint", "all"), robot, file, fld + ".joint")
-        d = {"effect": e["effect"], "joints": joints}
-        for k in _NOMINAL_EXTRA:
-            if k in e:
-                try:
-                    v = np.broadcast_to(np.asarray(e[k], dtype=float), (len(joints),)).copy()
-                except (TypeError, ValueError):
-                    raise _err(file, f"{fld}.{k}", f"expected a number or {len(joints)} numbers, got {e[k]!r}") from None
-                if not np.all(np.isfinite(v)) or np.any(v < 0):
-                    raise _err(file, f"{fld}.{k}", "values must be finite and >= 0")
-                d[k] = v
-        nominal.append(d)
-    if "datasets" not in cfg or not isinstance(cfg["datasets"], list) or not cfg["datasets"]:
-        raise _err(file, "datasets", "missing or empty (a list of {kind, file, split})")
+    nominal = _nominal(spec.nominal_effects, robot, file)
     datasets = []
-    for i, d in enumerate(cfg["datasets"]):
+    for i, d in enumerate(spec.datasets):
         fld = f"datasets[{i}]"
-        if not isinstance(d, dict):
-            raise _err(file, fld, "expected a mapping {kind, file, split}")
-        for k in ("kind", "file", "split"):
-            if k not in d:
-                raise _err(file, f"{fld}.{k}", "missing")
-        if d["kind"] not in KINDS:
-            raise _err(file, f"{fld}.kind", f"unknown kind {d['kind']!r}; known: {list(KINDS)}")
-        if d["split"] not in SPLITS:
-            raise _err(file, f"{fld}.split", f"expected one of {list(SPLITS)}, got {d['split']!r}")
-        if d["kind"] == "frf" and tool is None:
+        if d.kind == "frf" and tool is None:
             raise _err(file, "tool_frame", f"needed by the frf data set {fld} (FRFs are at the tool frame)")
-        fpath = base / str(d["file"])
-        arrs = _load_npz(fpath, f"{fld}.file", file)
-        data, extra = _LOADERS[d["kind"]](arrs, fpath, robot)
-        if d["kind"] == "response" and tool is None and any(c in TIP_CHANNELS for c in data["channels"]):
+        fpath = case_path(base, d.file, f"{fld}.file", file, allow_outside)
+        fmt = FORMATS[pathlib.PurePath(d.file).suffix.lower()]
+        if fmt == "csv":
+            arrs = csv_arrays(fpath, d, robot, file, fld)
+        elif fmt == "uff":
+            arrs = uff_arrays(fpath, d, robot, file, fld)
+        else:
+            arrs = _load_npz(fpath, f"{fld}.file", file)
+        data, extra = _LOADERS[d.kind](arrs, fpath, robot)
+        if d.kind == "response" and tool is None and any(c in TIP_CHANNELS for c in data["channels"]):
             raise _err(file, "tool_frame", f"needed by the response data set {fld} ({fpath.name}): its tip channels "
                        "are positions of the tool frame")
-        datasets.append(Dataset(d["kind"], fpath, d["split"], str(d.get("name", fpath.stem)), data, extra))
+        datasets.append(Dataset(d.kind, fpath, d.split, d.name or fpath.stem, data, extra))
     names = [d.name for d in datasets]
     if len(set(names)) != len(names):
         raise _err(file, "datasets", f"data set names must be unique, got {names}")
@@ -433,10 +456,23 @@ def load_case(path) -> Case:
         raise _err(file, "datasets", "no data set has split: train (the nominal model is fitted on it)")
     if not any(d.split == "validation" for d in datasets):
         raise _err(file, "datasets", "no data set has split: validation (the gap is judged on held-out data)")
-    noise = cfg.get("noise") or {}
-    if not isinstance(noise, dict):
-        raise _err(file, "noise", "expected a mapping, e.g. {modal_frequency_pct: 1.0}")
-    options = cfg.get("options") or {}
-    if not isinstance(options, dict):
-        raise _err(file, "options", "expected a mapping")
-    return Case(file, robot, tool, nominal, datasets, noise, options)
+    # noise: only what the case states (the diagnosis reports a default as such); options: all,
+    # defaults filled
+    noise = spec.noise.model_dump(exclude_none=True)
+    return Case(file, robot, tool, nominal, datasets, noise, spec.options.model_dump())
+
+
+def yaml_posture(spec, robot, case_file, fld: str, factor: float = 1.0) -> dict:
+    """The ``q0`` a case.yaml data set gives (CSV modal/response, UFF frf) as NPZ fields: ``q0``
+    and, for a mapping that names joints the model lacks, ``joints``; angles times ``factor``."""
+    q0 = spec.q0
+    names = list(robot.joint_names)
+    if isinstance(q0, dict):
+        missing = [j for j in names if j not in q0]
+        if missing:
+            raise _err(case_file, f"{fld}.q0", f"no angle for model joints {missing} (the model has joints {names})")
+        return {"q0": factor * np.asarray(list(q0.values()), float), "joints": np.asarray(list(q0))}
+    if len(q0) != len(names):
+        raise _err(case_file, f"{fld}.q0", f"expected {len(names)} angles (model joints {names} in that order), "
+                   f"got {len(q0)}")
+    return {"q0": factor * np.asarray(q0, float)}

@@ -1,0 +1,280 @@
+"""The schema of ``case.yaml`` (pydantic): every key, its type and range, which keys each effect
+and each data-set format takes. :func:`jflex.gap.load_case` validates with it; what needs the
+robot (joint names, frames) or the data files is checked there. ``python -m jflex.gap._schema``
+prints the table of ``docs/case_format.md``."""
+
+from __future__ import annotations
+
+import math
+import pathlib
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+from pydantic_core import PydanticCustomError
+
+from .._schema import Strict, markdown_table
+
+KINDS = ("torque", "frf", "modal", "response")
+SPLITS = ("train", "validation")
+
+# Every candidate name of the library (issue 6); nominal effects are named from the same list.
+EFFECT_NAMES = (
+    "joint_flexibility", "link_flexibility", "viscous_friction", "coulomb_friction", "stribeck_friction",
+    "gravity_compensator", "payload", "rotor_inertia", "orthogonal_compliance", "fractional_damping",
+    "hysteretic_damping", "backlash", "sensor_delay",
+)
+# nominal values an effect may state (every other coefficient is fitted)
+EFFECT_VALUES = {"joint_flexibility": ("stiffness", "damping"), "sensor_delay": ("value",), "rotor_inertia": ("value",)}
+
+# data file formats by suffix; which kinds each carries
+FORMATS = {".npz": "npz", ".csv": "csv", ".uff": "uff", ".unv": "uff"}
+FORMAT_KINDS = {"npz": KINDS, "csv": ("torque", "response", "modal"), "uff": ("frf",)}
+# CSV column map: the keys each kind needs and may take (a per-joint key maps joint -> column)
+CSV_COLUMNS = {
+    "torque": (("time", "position", "torque"), ("velocity", "acceleration")),
+    "response": (("time", "torque", "output"), ()),
+    "modal": (("frequency", "damping_ratio"), ()),
+}
+FRF_QUANTITIES = ("receptance", "mobility", "accelerance")
+
+
+def _bad(error_type: str, msg: str, at: str | None = None, **ctx):
+    # "at": a key below the checked field, appended to the field path of the error message
+    return PydanticCustomError(error_type, msg, {"at": at, **ctx})
+
+
+def _number(v, rule: str, got) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise _bad("number", "expected a finite number {rule}, got {got}", rule=rule, got=repr(got))
+    if (rule == "> 0" and v <= 0) or (rule == ">= 0" and v < 0) or (rule == "!= 0" and v == 0):
+        raise _bad("number", "expected a finite number {rule}, got {got}", rule=rule, got=repr(got))
+    return float(v)
+
+
+class NominalEffect(Strict):
+    """An effect the nominal model already contains."""
+
+    effect: Literal[EFFECT_NAMES] = Field(description="effect name (the candidates' list)")
+    joint: str | int | list[str | int] = Field(
+        "all", description="a joint name, a list of names, an index or `all`",
+        json_schema_extra={"expects": "joint name, index, list of them, or `all`"})
+    stiffness: list[float] | None = Field(
+        None, description="`joint_flexibility` only: stiffness [N m/rad] per joint (the start of the refit)",
+        json_schema_extra={"expects": "number > 0 or one per joint"})
+    damping: list[float] | None = Field(
+        None, description="`joint_flexibility` only: damping [N m s/rad] per joint",
+        json_schema_extra={"expects": "number >= 0 or one per joint"})
+    value: list[float] | None = Field(
+        None, description="`sensor_delay` [s] or `rotor_inertia` [kg m^2] (reflected rotor inertia) only",
+        json_schema_extra={"expects": "number >= 0 or one per joint"})
+
+    @model_validator(mode="before")
+    @classmethod
+    def _keys_of_effect(cls, data: Any):
+        if isinstance(data, dict) and data.get("effect") in EFFECT_NAMES:
+            allowed = ("effect", "joint") + EFFECT_VALUES.get(data["effect"], ())
+            for k in data:
+                if k not in allowed:
+                    raise _bad("effect_key", "unknown key {key} for effect {effect}; allowed keys: {allowed}",
+                               at=str(k), key=repr(k), effect=repr(data["effect"]), allowed=list(allowed))
+        return data
+
+    @field_validator("joint", mode="before")
+    @classmethod
+    def _joint(cls, v):
+        one = lambda j: (isinstance(j, str) and j != "") or (isinstance(j, int) and not isinstance(j, bool) and j >= 0)
+        if v is None:
+            return "all"
+        if one(v) or (isinstance(v, list) and v and all(one(j) for j in v)):
+            return v
+        raise _bad("joint", "expected a joint name, an index >= 0, a non-empty list of them or 'all', got {got}",
+                   got=repr(v))
+
+    @field_validator("stiffness", "damping", "value", mode="before")
+    @classmethod
+    def _values(cls, v, info):
+        if v is None:
+            return v
+        rule = "> 0" if info.field_name == "stiffness" else ">= 0"
+        items = v if isinstance(v, list) and v else [v]
+        return [_number(x, rule, v) for x in items]
+
+
+class Noise(Strict):
+    """Noise floors the data cannot show."""
+
+    modal_frequency_pct: Annotated[float, Field(ge=0)] | None = Field(
+        None, description="noise floor of modal tables [%] (default 1 %)", json_schema_extra={"expects": "number >= 0"})
+
+
+class Options(Strict):
+    """Settings of the diagnosis."""
+
+    inertia_prior: Annotated[float, Field(ge=0)] = Field(
+        1.0, description="weight of the prior toward the CAD inertial parameters in the nominal refit (0: none)")
+    refit_inertia: bool = Field(True, description="refit the inertial parameters in the nominal identification")
+    filter_cutoff_hz: float | Literal["auto"] = Field(
+        "auto", description="low-pass cutoff [Hz] of angle-only torque data, or `auto` (from the motion band)",
+        json_schema_extra={"expects": "number > 0 or `auto`"})
+    decimate: Annotated[int, Field(ge=1)] = Field(1, description="keep every n-th sample of filtered torque data")
+    max_effects: Annotated[int, Field(ge=0)] = Field(3, description="most effects the selection adds")
+
+    @field_validator("filter_cutoff_hz", mode="before")
+    @classmethod
+    def _cutoff(cls, v):
+        return v if v == "auto" else _number(v, "> 0", v)
+
+
+_PER_JOINT = {"expects": "mapping joint: column"}
+
+
+class Columns(Strict):
+    """Column map of a CSV data set: CSV header names (a per-joint key maps joint -> column)."""
+
+    time: str | None = Field(None, description="time [s, or `units.time`] (torque, response)")
+    position: dict[str, str] | None = Field(
+        None, description="angle columns (torque); joints the model lacks are kept as posture variables",
+        json_schema_extra=_PER_JOINT)
+    velocity: dict[str, str] | None = Field(None, description="rate columns (torque, optional)",
+                                             json_schema_extra=_PER_JOINT)
+    acceleration: dict[str, str] | None = Field(None, description="acceleration columns (torque, optional)",
+                                                 json_schema_extra=_PER_JOINT)
+    torque: dict[str, str] | None = Field(
+        None, description="torque columns [N m] after `scale` (torque, response: every model joint)",
+        json_schema_extra=_PER_JOINT)
+    output: dict[str, str] | None = Field(
+        None, description="measured channels (response): a model joint [rad] or `tip_x`/`tip_y`/`tip_z` [m]",
+        json_schema_extra={"expects": "mapping channel: column"})
+    frequency: str | None = Field(None, description="natural frequency [Hz] column (modal)")
+    damping_ratio: str | None = Field(None, description="damping-ratio column (modal; empty or NaN: not identified)")
+
+
+class Units(Strict):
+    """Units of a CSV data set's columns (after `scale`)."""
+
+    time: Literal["s", "ms"] = Field("s", description="time column unit")
+    position: Literal["rad", "deg"] = Field(
+        "rad", description="angles, their rates (per s) and accelerations (per s^2), `q0` and joint outputs")
+
+
+class Dataset(Strict):
+    """One measured data set."""
+
+    kind: Literal[KINDS] = Field(description="what the file holds")
+    file: Annotated[str, Field(min_length=1)] = Field(
+        description="`.npz`, `.csv` (torque, response, modal) or `.uff`/`.unv` (frf) inside the case folder")
+    split: Literal[SPLITS] = Field(description="`train`: fitted; `validation`: the gap is judged on it")
+    name: Annotated[str, Field(min_length=1)] | None = Field(None, description="unique name (default: the file's stem)")
+    columns: Columns | None = Field(None, description="CSV only: the column map (required for a CSV file)")
+    scale: dict[str, float] | None = Field(
+        None, description="CSV only: column -> factor applied to the raw column (e.g. current [A] x torque "
+                          "constant x gear ratio)", json_schema_extra={"expects": "mapping column: number != 0"})
+    units: Units | None = Field(None, description="CSV only: units of the time and angle columns")
+    delimiter: Literal[",", ";", "tab", "space"] | None = Field(
+        None, description="CSV only: field separator (default: sniffed from the header line)")
+    q0: list[float] | dict[str, float] | None = Field(
+        None, description="CSV response/modal and UFF frf: the posture, a list in model joint order or joint: angle "
+                          "[rad, or `units.position`]", json_schema_extra={"expects": "list of numbers or mapping joint: number"})
+    quantity: Literal[FRF_QUANTITIES] | None = Field(
+        None, description="UFF only: what the records hold (default: read off their unit labels m, m/s, m/s^2)")
+
+    @field_validator("scale", mode="before")
+    @classmethod
+    def _scale(cls, v):
+        if v is None:
+            return v
+        if not isinstance(v, dict):
+            raise _bad("scale", "expected a mapping column: factor, got {got}", got=repr(v))
+        for k, x in v.items():
+            if not isinstance(k, str):
+                raise _bad("scale", "expected column names as keys, got {got}", got=repr(k))
+            try:
+                _number(x, "!= 0", x)
+            except PydanticCustomError:
+                raise _bad("scale", "expected a finite number != 0, got {got}", at=k, got=repr(x)) from None
+        return {k: float(x) for k, x in v.items()}
+
+    @field_validator("q0", mode="before")
+    @classmethod
+    def _q0(cls, v):
+        if v is None:
+            return v
+        if isinstance(v, list) and v:
+            return [_number(x, "", v) for x in v]
+        if isinstance(v, dict) and v and all(isinstance(k, str) for k in v):
+            return {k: _number(x, "", v) for k, x in v.items()}
+        raise _bad("q0", "expected a list of numbers [rad] (model joint order) or a mapping joint: angle, got {got}",
+                   got=repr(v))
+
+    @model_validator(mode="after")
+    def _format_keys(self):
+        fmt = FORMATS.get(pathlib.PurePath(self.file).suffix.lower())
+        if fmt is None:
+            raise _bad("file", "expected a .npz, .csv (torque, response, modal) or .uff/.unv (frf) file, got {got}",
+                       at="file", got=repr(self.file))
+        if self.kind not in FORMAT_KINDS[fmt]:
+            raise _bad("file", "a {kind} data set cannot be a {fmt} file (expected {ok})", at="file", kind=self.kind,
+                       fmt=fmt.upper(), ok=" or ".join(f for f, ks in FORMAT_KINDS.items() if self.kind in ks))
+        csv_only = ("columns", "scale", "units", "delimiter")
+        for k in csv_only:
+            if fmt != "csv" and getattr(self, k) is not None:
+                raise _bad("format_key", "only for CSV data sets (this file is {fmt})", at=k, fmt=fmt.upper())
+        if self.quantity is not None and fmt != "uff":
+            raise _bad("format_key", "only for UFF data sets", at="quantity")
+        needs_q0 = fmt == "uff" or (fmt == "csv" and self.kind == "modal")
+        if needs_q0 and self.q0 is None:
+            raise _bad("missing", "missing (the measurement posture: a {kind} {fmt} file does not hold it)", at="q0",
+                       kind=self.kind, fmt=fmt.upper())
+        if fmt == "npz" and self.q0 is not None:
+            raise _bad("format_key", "not for NPZ data sets (an NPZ file holds its own q0)", at="q0")
+        if fmt == "csv":
+            if self.columns is None:
+                raise _bad("missing", "missing (a CSV data set needs its column map, see docs/case_format.md)",
+                           at="columns")
+            need, opt = CSV_COLUMNS[self.kind]
+            for k in need:
+                if getattr(self.columns, k) is None:
+                    raise _bad("missing", "missing (a {kind} CSV needs columns {need})", at=f"columns.{k}",
+                               kind=self.kind, need=list(need))
+            for k in Columns.model_fields:
+                if getattr(self.columns, k) is not None and k not in need + opt:
+                    raise _bad("format_key", "not a column of a {kind} data set (needs {need}, may have {opt})",
+                               at=f"columns.{k}", kind=self.kind, need=list(need), opt=list(opt))
+            if self.kind == "modal" and self.units is not None and self.units.time != "s":
+                raise _bad("format_key", "a modal table has no time column", at="units.time")
+        return self
+
+
+class CaseSpec(Strict):
+    """case.yaml."""
+
+    robot: Annotated[str, Field(min_length=1)] = Field(
+        description="the nominal model: a URDF or robot YAML inside the case folder, or a config name such as `panda`")
+    robot_inertia: Annotated[str, Field(min_length=1)] | None = Field(
+        None, description="NPZ with `inertia` (n, 10): link parameters replacing the robot's")
+    tool_frame: Annotated[str, Field(min_length=1)] | None = Field(
+        None, description="frame of the tool FRFs and tip channels (required with frf data or tip channels)")
+    nominal_effects: list[NominalEffect] = Field([], description="what the nominal model already contains")
+    datasets: Annotated[list[Dataset], Field(min_length=1)] = Field(
+        description="the measured data sets (at least one train and one validation)")
+    noise: Noise = Field(Noise(), description="noise floors")
+    options: Options = Field(Options(), description="diagnosis settings")
+    name: str | None = Field(None, description="the case's name")
+    notes: str | None = Field(None, description="free text")
+
+    @field_validator("nominal_effects", "noise", "options", mode="before")
+    @classmethod
+    def _empty(cls, v, info):
+        # an empty YAML block (`noise:`) reads as null: the defaults
+        if v is None:
+            return [] if info.field_name == "nominal_effects" else {}
+        return v
+
+
+def schema_table() -> str:
+    """The markdown table of case.yaml's fields (``docs/case_format.md`` holds it verbatim)."""
+    return markdown_table(CaseSpec)
+
+
+if __name__ == "__main__":
+    print(schema_table())
