@@ -226,6 +226,25 @@ def _I6(I: s.Inertia):
     return rows
 
 
+def _barrier6(*blocks):
+    """:func:`_scalar.barrier` for nested lists of scalars (6-vectors, 6x6 matrices)."""
+    flat = []
+
+    def put(x):
+        if isinstance(x, list):
+            return [put(y) for y in x]
+        flat.append(x)
+        return len(flat) - 1
+
+    tags = [put(b) for b in blocks]
+    vals = s.barrier(*flat)
+
+    def get(t):
+        return [get(y) for y in t] if isinstance(t, list) else vals[t]
+
+    return [get(t) for t in tags]
+
+
 def aba(robot: Robot, q, qd, tau, f_ext=None):
     """Forward dynamics by the articulated-body algorithm: joint accelerations (n,)."""
     q, qd, tau = _checked(robot, q=q, qd=qd, tau=tau)
@@ -259,11 +278,13 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
             uD = s.mul(u[i], Dinv)
             Iac = _mv6(Ia, cc[i])
             pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
+            Ia, pa = _barrier6(Ia, pa)
             XtIa = [list(col) for col in zip(*_mm6([list(r) for r in zip(*X[i])], Ia))]  # (X^T Ia)^T
             XtIaX = _mm6([list(r) for r in zip(*XtIa)], X[i])
             IA[par] = [[s.add(IA[par][r][k], XtIaX[r][k]) for k in range(6)] for r in range(6)]
             Xtpa = _mtv6(X[i], pa)
             pA[par] = [s.add(a, b) for a, b in zip(pA[par], Xtpa)]
+            IA[par], pA[par] = _barrier6(IA[par], pA[par])
     a0 = [0.0, 0.0, 0.0] + list(-c.gravity)
     a = [None] * n
     qdd = [None] * n
@@ -272,6 +293,7 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
         ap = [s.add(x, y) for x, y in zip(_mv6(X[i], a0 if par < 0 else a[par]), cc[i])]
         qdd[i] = s.mul(s.sub(u[i], s.sum_(*(s.mul(x, y) for x, y in zip(U[i], ap)))), 1.0 / D[i])
         a[i] = [s.add(x, s.mul(y, qdd[i])) for x, y in zip(ap, S[i])]
+        a[i], (qdd[i],) = _barrier6(a[i], [qdd[i]])
     return s.stack(qdd, _dtype())
 
 
