@@ -18,7 +18,9 @@ A robot file (``configs/robots/*.yaml``) holds either a DH table or a URDF refer
       - {mass: 10.0, com: [0, 0, 0.1], inertia: [Ixx, Ixy, Iyy, Ixz, Iyz, Izz]}
     gravity: [0, 0, -9.81]
 
-or ``urdf: path/to/robot.urdf`` (relative to the YAML file).
+or ``urdf: path/to/robot.urdf`` (relative to the YAML file), optionally reduced as in
+:func:`load_urdf`: ``lock: {torso_1_joint: 0.1}`` [rad or m] and/or ``joints: [arm_1, arm_2]``
+(the joints kept, every other one locked at its ``lock`` value or 0).
 """
 
 from __future__ import annotations
@@ -71,6 +73,11 @@ def _example_robot_urdf(name: str) -> pathlib.Path | None:
     return None
 
 
+# The Panda's second finger mimics the first (a coupled coordinate jflex does not model): the
+# named robot is the 7-joint arm with the hand closed, as the benchmarks use it.
+_EXAMPLE_LOCKS = {"panda": {"panda_finger_joint1": 0.0, "panda_finger_joint2": 0.0}}
+
+
 def available_robots() -> list[str]:
     """Names accepted by :func:`load_robot` besides paths."""
     names = set()
@@ -85,7 +92,8 @@ def available_robots() -> list[str]:
 
 def load_robot(spec: str | os.PathLike | dict) -> Robot:
     """A :class:`Robot` from a YAML file, a URDF file, a config name (``"staubli_tx200"``, or
-    ``"panda"``/``"ur5"`` when ``example-robot-data`` is installed) or an already-parsed mapping."""
+    ``"panda"``/``"ur5"`` when ``example-robot-data`` is installed; ``"panda"`` is the 7-joint arm, its
+    fingers locked closed) or an already-parsed mapping."""
     if isinstance(spec, dict):
         return robot_from_config(spec, where="<config>")
     s = str(spec)
@@ -100,7 +108,7 @@ def load_robot(spec: str | os.PathLike | dict) -> Robot:
             return robot_from_config(load_yaml(cand), where=str(cand), base=cand.parent)
     urdf = _example_robot_urdf(s)
     if urdf is not None:
-        return load_urdf(urdf)
+        return load_urdf(urdf, lock=_EXAMPLE_LOCKS.get(s))
     raise ConfigError(f"unknown robot '{s}': not a .yaml/.urdf path, and not one of {available_robots()}")
 
 
@@ -137,7 +145,7 @@ def robot_from_config(cfg: dict, where: str = "<config>", base: pathlib.Path | N
 def _robot_from_config(cfg, where, base):
     if not isinstance(cfg, dict):
         raise ConfigError(f"{where}: expected a mapping, got {type(cfg).__name__}")
-    known = {"name", "source", "notes", "dh", "urdf", "joint_names", "limits", "links", "gravity", "units"}
+    known = {"name", "source", "notes", "dh", "urdf", "lock", "joints", "joint_names", "limits", "links", "gravity", "units"}
     unknown = set(cfg) - known
     if unknown:
         raise ConfigError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(known)}")
@@ -150,7 +158,10 @@ def _robot_from_config(cfg, where, base):
         path = pathlib.Path(cfg["urdf"])
         if not path.is_absolute() and base is not None:
             path = base / path
-        return load_urdf(path, gravity=gravity)
+        return load_urdf(path, gravity=gravity, lock=cfg.get("lock"), joints=cfg.get("joints"))
+    for key in ("lock", "joints"):
+        if key in cfg:
+            raise ConfigError(f"{where}.{key}: only a 'urdf' robot can lock joints (a DH table has no fixed joints)")
 
     dh = cfg["dh"]
     if not isinstance(dh, dict):

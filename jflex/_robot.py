@@ -130,8 +130,12 @@ def make_robot(
     frame_R=None,
     frame_p=None,
     base_name: str = "base",
+    check_physical: bool = True,
 ) -> Robot:
-    """Build a :class:`Robot`, validating shapes and physical consistency (named errors)."""
+    """Build a :class:`Robot`, validating shapes and physical consistency (named errors).
+
+    ``check_physical=False`` skips the physical-consistency check of the inertias (a builder that
+    checked them itself, e.g. :func:`load_urdf`, which loads vendor inertias with a warning)."""
     n = len(parents)
     def arr(x, shape, field):
         a = np.asarray(x, dtype=float)
@@ -151,7 +155,7 @@ def make_robot(
             raise ParameterError(f"joint '{joint_names[i]}': axis must be non-zero, got {ax[i].tolist()}")
     ax = ax / norms[:, None]
     inertia = np.zeros((n, 10)) if inertia is None else arr(inertia, (n, 10), "inertia")
-    for i in range(n):
+    for i in range(n if check_physical else 0):
         check_inertia(inertia[i], f"link '{link_names[i]}'")
     nf = len(frame_names)
     fR = np.tile(np.eye(3), (nf, 1, 1)) if frame_R is None else arr(frame_R, (nf, 3, 3), "frame_R")
@@ -183,35 +187,45 @@ def make_robot(
     )
 
 
-def check_inertia(pi, where: str, rtol: float = 1e-9) -> None:
-    """Raise :class:`ParameterError` unless ``pi`` is physically consistent: m >= 0 and the
-    inertia about the centre of mass positive semi-definite with the triangle inequalities."""
+def inertia_defect(pi, rtol: float = 1e-9) -> str | None:
+    """Why the 10 parameters ``pi`` are not physically consistent, or ``None`` when they are:
+    m >= 0, and the inertia about the centre of mass positive semi-definite with the triangle
+    inequalities. Round-off up to ``rtol`` of the body's own scale (its largest moment about the
+    frame origin or the centre of mass) is tolerated, so a point mass (zero moments about its
+    centre of mass) and moments of -1e-22 beside 0.1 pass."""
     pi = np.asarray(pi, dtype=float)
     m = pi[0]
     if not np.isfinite(pi).all():
-        raise ParameterError(f"{where}: inertial parameters contain NaN or inf")
+        return "inertial parameters contain NaN or inf"
     if m < 0:
-        raise ParameterError(f"{where}: mass must be >= 0, got {m}")
+        return f"mass must be >= 0, got {m}"
     I_o = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
     if m == 0:
         if np.abs(pi[1:4]).max() > 0:
-            raise ParameterError(f"{where}: zero mass but non-zero first moment m*c = {pi[1:4].tolist()}")
+            return f"zero mass but non-zero first moment m*c = {pi[1:4].tolist()}"
         I_c = I_o
     else:
         c = pi[1:4] / m
         I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
     ev = np.linalg.eigvalsh(I_c)
-    scale = max(1.0, np.abs(ev).max())
-    if ev.min() < -rtol * scale:
-        raise ParameterError(
-            f"{where}: rotational inertia about the centre of mass is not positive semi-definite "
-            f"(principal moments {np.round(ev, 12).tolist()})"
+    tol = rtol * max(np.abs(ev).max(), np.abs(I_o).max())
+    if ev.min() < -tol:
+        return (
+            "rotational inertia about the centre of mass is not positive semi-definite "
+            f"(principal moments {[float(e) for e in ev]})"
         )
     a, b, c3 = np.sort(ev)
-    if a + b < c3 - rtol * scale:
-        raise ParameterError(
-            f"{where}: principal moments {[a, b, c3]} violate the triangle inequality I1 + I2 >= I3"
-        )
+    if a + b < c3 - tol:
+        return f"principal moments {[float(a), float(b), float(c3)]} violate the triangle inequality I1 + I2 >= I3"
+    return None
+
+
+def check_inertia(pi, where: str, rtol: float = 1e-9) -> None:
+    """Raise :class:`ParameterError` naming ``where`` unless ``pi`` is physically consistent
+    (see :func:`inertia_defect`)."""
+    defect = inertia_defect(pi, rtol)
+    if defect is not None:
+        raise ParameterError(f"{where}: {defect}")
 
 
 def check_q(robot: Robot, q, name: str = "q"):
@@ -229,10 +243,12 @@ def move_params(pi, T) -> np.ndarray:
     transform ``T`` in B (NumPy; for builders)."""
     pi = np.asarray(pi, dtype=float)
     m = pi[0]
-    if m == 0:
-        return np.zeros(10)
     R, p = T[:3, :3], T[:3, 3]
     I_o = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
+    if m == 0:
+        # A massless body may still carry rotational inertia (bolt's feet): it only rotates.
+        I2 = R @ I_o @ R.T
+        return np.array([0.0, 0.0, 0.0, 0.0, I2[0, 0], I2[0, 1], I2[1, 1], I2[0, 2], I2[1, 2], I2[2, 2]])
     c = pi[1:4] / m
     I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
     c2 = R @ c + p

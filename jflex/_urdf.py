@@ -1,20 +1,29 @@
 """Robots from URDF files: joints, limits and inertials; fixed joints merged into their parent
-body (what they carried stays reachable as a named frame, e.g. a tool flange)."""
+body (what they carried stays reachable as a named frame, e.g. a tool flange).
+
+The result matches ``pinocchio.buildModelFromUrdf(path)`` (fixed base, ``mimic=False``): the same
+joint order, the same merged bodies and, for every URDF that ships in example-robot-data, the same
+``rnea``, ``crba`` and ``aba`` (tests/test_urdf_parity.py). ``lock``/``joints`` reduce the model
+as ``pinocchio.buildReducedModel`` does.
+"""
 
 from __future__ import annotations
 
 import os
 import pathlib
+import warnings
 import xml.etree.ElementTree as ET
+from typing import Mapping, Sequence
 
 import numpy as np
 
-from ._errors import URDFError
-from ._robot import PRISMATIC, REVOLUTE, Robot, check_inertia, make_robot, move_params
-from ._errors import ParameterError
+from ._errors import ParameterError, URDFError
+from ._robot import PRISMATIC, REVOLUTE, Robot, inertia_defect, make_robot, move_params
+from ._spatial import rot_axis_angle
 
 _MOVING = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
-_SUPPORTED = tuple(_MOVING) + ("fixed",)
+_FREE = ("floating", "planar")
+_SUPPORTED = tuple(_MOVING) + ("fixed",) + _FREE
 
 
 def _rpy(r, p, y):
@@ -63,8 +72,12 @@ def _attr_float(el, name, where, default=None):
     return x
 
 
-def _link_inertia(link, fname):
-    """10 parameters of a <link> in its own frame (zeros if it has no <inertial>)."""
+def _link_inertia(link, fname, strict):
+    """10 parameters of a <link> in its own frame (zeros if it has no <inertial>).
+
+    Point masses and massless links are accepted, as Pinocchio accepts them. A non-physical
+    inertia (not positive semi-definite beyond round-off, or breaking the triangle inequality) is
+    loaded as given with a warning naming the link, or refused when ``strict``."""
     name = link.get("name")
     where = f"{fname}: link '{name}'"
     inertial = link.find("inertial")
@@ -83,28 +96,65 @@ def _link_inertia(link, fname):
     I = np.array(
         [[vals["ixx"], vals["ixy"], vals["ixz"]], [vals["ixy"], vals["iyy"], vals["iyz"]], [vals["ixz"], vals["iyz"], vals["izz"]]]
     )
+    if not np.isfinite(I).all():
+        raise URDFError(f"{where}: <inertia> contains inf")
     T = _origin(inertial, f"{where} <inertial>")
     R, c = T[:3, :3], T[:3, 3]
     I_c = R @ I @ R.T
-    ev = np.linalg.eigvalsh(I_c)
-    if m > 0 and ev.min() <= 0:
-        raise URDFError(f"{where}: inertia is not positive definite (principal moments {ev.tolist()})")
     I_o = I_c + m * (c @ c * np.eye(3) - np.outer(c, c))
     h = m * c
     pi = np.array([m, *h, I_o[0, 0], I_o[0, 1], I_o[1, 1], I_o[0, 2], I_o[1, 2], I_o[2, 2]])
-    try:
-        check_inertia(pi, where)
-    except ParameterError as exc:
-        raise URDFError(str(exc)) from None
+    defect = inertia_defect(pi)
+    if defect is not None:
+        if strict:
+            raise URDFError(f"{where}: non-physical inertia: {defect} (strict=True refuses it)")
+        warnings.warn(
+            f"{where}: non-physical inertia loaded as given, as Pinocchio loads it: {defect}. "
+            "An identification can correct it; load_urdf(..., strict=True) refuses it.",
+            UserWarning,
+            stacklevel=4,
+        )
     return pi
 
 
-def load_urdf(path: str | os.PathLike, *, gravity=(0.0, 0.0, -9.81)) -> Robot:
-    """Load a fixed-base URDF into a :class:`Robot`.
+def load_urdf(
+    path: str | os.PathLike,
+    *,
+    gravity=(0.0, 0.0, -9.81),
+    lock: Mapping[str, float] | None = None,
+    joints: Sequence[str] | None = None,
+    mimic: str = "refuse",
+    floating: str | None = None,
+    strict: bool = False,
+) -> Robot:
+    """Load a URDF into a fixed-base :class:`Robot`.
 
-    Revolute, continuous and prismatic joints become joints (in depth-first order from the root,
-    children in file order, as Pinocchio orders them); fixed joints are merged into the parent body,
-    their child links kept as named frames. Errors name the file, link or joint at fault.
+    Revolute, continuous and prismatic joints become joints, in Pinocchio's order: depth first
+    from the root, a link's children in the order of their joint names (urdfdom keeps joints in a
+    sorted map). A continuous joint is a revolute joint without limits, its coordinate the angle
+    (Pinocchio stores it as ``(cos, sin)``). Fixed joints are merged into the parent body, their
+    child links kept as named frames. The root link is fixed to the world, as in
+    ``pinocchio.buildModelFromUrdf(path)`` without a root joint: a legged robot or humanoid loads
+    with its base held where it stands.
+
+    **Arguments:**
+
+    - ``lock``: ``{joint name: value}`` [rad or m]: these joints become fixed joints at that value,
+      their links merged into the parent body (``pinocchio.buildReducedModel``).
+    - ``joints``: the joints to keep; every other moving joint is locked at its ``lock`` value, or
+      0 (a joint that mimics a locked joint: at ``multiplier * value + offset``).
+    - ``mimic``: ``"refuse"`` (default) raises for a kept joint with a ``<mimic>`` tag, whose
+      coupled coordinate jflex does not model (lock it, or both); ``"independent"`` loads it as an
+      independent joint, as ``pinocchio.buildModelFromUrdf(path)`` does by default.
+    - ``floating``: what to do with a ``floating`` or ``planar`` joint from the root link (a
+      floating base written as a joint from ``world``): ``"fixed"`` welds it at its origin
+      (the default, with a warning unless passed explicitly), ``"refuse"`` raises. Such joints
+      deeper in the tree are refused.
+    - ``strict``: refuse non-physical link inertias (by default they load with a warning naming the
+      link, as Pinocchio loads them; an identification can correct them). Point masses, massless
+      links and round-off relative to the link's own scale are physical.
+
+    Errors (a :class:`URDFError`) name the file and the link, joint or argument at fault.
     """
     path = pathlib.Path(path)
     fname = str(path)
@@ -114,19 +164,30 @@ def load_urdf(path: str | os.PathLike, *, gravity=(0.0, 0.0, -9.81)) -> Robot:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise URDFError(f"{fname}: not valid XML ({exc})") from None
-    return _from_element(root, fname, gravity)
+    return _from_element(root, fname, gravity, lock, joints, mimic, floating, strict)
 
 
-def from_urdf_string(text: str, *, gravity=(0.0, 0.0, -9.81), name: str = "<string>") -> Robot:
-    """Like :func:`load_urdf`, from the XML text itself."""
+def from_urdf_string(
+    text: str,
+    *,
+    gravity=(0.0, 0.0, -9.81),
+    name: str = "<string>",
+    lock: Mapping[str, float] | None = None,
+    joints: Sequence[str] | None = None,
+    mimic: str = "refuse",
+    floating: str | None = None,
+    strict: bool = False,
+) -> Robot:
+    """Like :func:`load_urdf`, from the XML text itself (``name`` stands for the file in errors)."""
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise URDFError(f"{name}: not valid XML ({exc})") from None
-    return _from_element(root, name, gravity)
+    return _from_element(root, name, gravity, lock, joints, mimic, floating, strict)
 
 
-def _from_element(root, fname, gravity) -> Robot:
+def _parse_tree(root, fname):
+    """Links by name, joints by name, children (joint elements) per link, the root link."""
     if root.tag != "robot":
         raise URDFError(f"{fname}: top element must be <robot>, got <{root.tag}>")
     links = {}
@@ -140,17 +201,19 @@ def _from_element(root, fname, gravity) -> Robot:
     if not links:
         raise URDFError(f"{fname}: no <link> elements")
     children: dict[str, list] = {k: [] for k in links}
-    parent_of = {}
+    parent_of, by_name = {}, {}
     for j in root.findall("joint"):
         jname = j.get("name")
         where = f"{fname}: joint '{jname}'"
         if not jname:
             raise URDFError(f"{fname}: a <joint> has no name")
+        if jname in by_name:
+            raise URDFError(f"{where} is defined twice; joint names must be unique")
         jtype = j.get("type")
         if jtype not in _SUPPORTED:
             raise URDFError(
                 f"{where}: unknown or unsupported joint type '{jtype}'; jflex models fixed-base trees "
-                f"with joint types {list(_SUPPORTED)}"
+                f"with joint types {list(_SUPPORTED[:4])}"
             )
         pel, cel = j.find("parent"), j.find("child")
         if pel is None or cel is None:
@@ -163,10 +226,101 @@ def _from_element(root, fname, gravity) -> Robot:
         if child in parent_of:
             raise URDFError(f"{where}: link '{child}' already has parent joint '{parent_of[child].get('name')}'")
         parent_of[child] = j
+        by_name[jname] = j
         children[parent].append(j)
     roots = [k for k in links if k not in parent_of]
     if len(roots) != 1:
         raise URDFError(f"{fname}: expected exactly one root link, found {roots or 'none (a cycle)'}")
+    # urdfdom keeps joints in a map sorted by name, so Pinocchio visits a link's children in the
+    # order of their joint names (not file order); the joint order of the model follows.
+    for lst in children.values():
+        lst.sort(key=lambda j: j.get("name"))
+    return links, by_name, children, roots[0]
+
+
+def _mimic_of(j, by_name, where):
+    """(leader, multiplier, offset) of a moving joint's <mimic>, or None."""
+    el = j.find("mimic")
+    if el is None:
+        return None
+    leader = el.get("joint")
+    if leader not in by_name or by_name[leader].get("type") not in _MOVING:
+        raise URDFError(f"{where}: <mimic joint='{leader}'> must name a revolute, continuous or prismatic joint")
+    return leader, _attr_float(el, "multiplier", f"{where} <mimic>", 1.0), _attr_float(el, "offset", f"{where} <mimic>", 0.0)
+
+
+def _locked_values(fname, by_name, lock, joints, mimic):
+    """{joint name: value} of the moving joints that become fixed (``lock``/``joints``/``mimic``)."""
+    if mimic not in ("refuse", "independent"):
+        raise URDFError(f"{fname}: mimic must be 'refuse' or 'independent', got {mimic!r}")
+    moving = [k for k, j in by_name.items() if j.get("type") in _MOVING]
+    lock = {} if lock is None else lock
+    if not isinstance(lock, Mapping):
+        raise URDFError(f"{fname}: lock must be a mapping {{joint name: value}}, got {type(lock).__name__}")
+
+    def known(name, arg):
+        if name not in by_name or name not in moving:
+            what = "is not a moving joint" if name in by_name else "is not a joint"
+            raise URDFError(f"{fname}: {arg} names '{name}', which {what} of this URDF; moving joints: {moving}")
+
+    values = {}
+    for name, v in lock.items():
+        known(name, "lock")
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            raise URDFError(f"{fname}: lock['{name}'] must be a number [rad or m], got {v!r}") from None
+        if not np.isfinite(x):
+            raise URDFError(f"{fname}: lock['{name}'] must be finite, got {v!r}")
+        lim = by_name[name].find("limit")
+        if by_name[name].get("type") != "continuous" and lim is not None:
+            lo = _attr_float(lim, "lower", f"{fname}: joint '{name}' <limit>", 0.0)
+            hi = _attr_float(lim, "upper", f"{fname}: joint '{name}' <limit>", 0.0)
+            if not lo <= x <= hi:
+                raise URDFError(f"{fname}: lock['{name}'] = {x} lies outside the joint's limits [{lo}, {hi}]")
+        values[name] = x
+    keep = set(moving)
+    if joints is not None:
+        if isinstance(joints, str) or not all(isinstance(k, str) for k in joints):
+            raise URDFError(f"{fname}: joints must be a list of joint names, got {joints!r}")
+        for name in joints:
+            known(name, "joints")
+            if name in values:
+                raise URDFError(f"{fname}: joint '{name}' is both kept (joints) and locked (lock)")
+        keep = set(joints)
+    keep -= set(values)
+    # 'independent' ignores <mimic> as Pinocchio does by default (it may even name a missing joint)
+    mimics = {k: None if mimic == "independent" else _mimic_of(by_name[k], by_name, f"{fname}: joint '{k}'") for k in moving}
+    # a joint that mimics a locked joint, and is not named itself, follows its leader's value
+    for name in moving:
+        m = mimics[name]
+        if name in values or m is None or m[0] in keep:
+            continue
+        if joints is None or name not in joints:
+            leader_value = values.get(m[0], 0.0)
+            values[name] = m[1] * leader_value + m[2]
+            keep.discard(name)
+    for name in moving:
+        if name not in keep:
+            values.setdefault(name, 0.0)
+    if mimic == "refuse":
+        for name in moving:
+            m = mimics[name]
+            if m is None or (name in values and m[0] in values):
+                continue
+            raise URDFError(
+                f"{fname}: joint '{name}' mimics joint '{m[0]}' (multiplier {m[1]}, offset {m[2]}); jflex does not "
+                f"model coupled coordinates. Lock both (lock={{'{m[0]}': 0.0}} locks '{name}' with it), or load "
+                "them as independent joints with mimic='independent' (Pinocchio's default)"
+            )
+    return values
+
+
+def _from_element(root, fname, gravity, lock=None, joints=None, mimic="refuse", floating=None, strict=False) -> Robot:
+    links, by_name, children, root_link = _parse_tree(root, fname)
+    if floating not in (None, "fixed", "refuse"):
+        raise URDFError(f"{fname}: floating must be 'fixed' or 'refuse', got {floating!r}")
+    locked = _locked_values(fname, by_name, lock, joints, mimic)
 
     # Depth-first walk. Each URDF link maps to (body index or -1 for the base, T link->body).
     joint_names, link_names, parents, types = [], [], [], []
@@ -174,9 +328,16 @@ def _from_element(root, fname, gravity) -> Robot:
     frame_names, frame_parents, frame_T = [], [], []
     base_params = np.zeros(10)
 
+    def axis_of(j, where):
+        axis_el = j.find("axis")
+        axis = _floats(axis_el.get("xyz"), 3, f"{where} <axis xyz>") if axis_el is not None else np.array([1.0, 0, 0])
+        if np.linalg.norm(axis) == 0:
+            raise URDFError(f"{where}: <axis xyz> must be non-zero")
+        return axis / np.linalg.norm(axis)
+
     def visit(link_name, body, T_body_link):
         nonlocal base_params
-        pi = move_params(_link_inertia(links[link_name], fname), T_body_link)
+        pi = move_params(_link_inertia(links[link_name], fname, strict), T_body_link)
         if body < 0:
             base_params = base_params + pi
         else:
@@ -185,19 +346,41 @@ def _from_element(root, fname, gravity) -> Robot:
             jname = j.get("name")
             where = f"{fname}: joint '{jname}'"
             child = j.find("child").get("link")
-            T_link_joint = _origin(j, where)
-            T_body_joint = T_body_link @ T_link_joint
+            T_body_joint = T_body_link @ _origin(j, where)
             jtype = j.get("type")
-            if jtype == "fixed":
+            if jtype in _FREE:
+                if link_name != root_link:
+                    raise URDFError(
+                        f"{where}: unknown or unsupported joint type '{jtype}' below the root link; jflex models "
+                        "fixed-base trees (a free joint from the root link, a floating base, is welded there)"
+                    )
+                if floating == "refuse":
+                    raise URDFError(
+                        f"{where}: a {jtype} joint from the root link (a floating base) and floating='refuse'; "
+                        "jflex models fixed-base trees: floating='fixed' welds it at its origin"
+                    )
+                if floating is None:
+                    warnings.warn(
+                        f"{where}: {jtype} joint from the root link welded at its origin: jflex models "
+                        "fixed-base trees (pass floating='fixed' to say so, or 'refuse')",
+                        UserWarning,
+                        stacklevel=4,
+                    )
+            if jtype in _FREE or jtype == "fixed" or jname in locked:
+                if jname in locked:
+                    T_motion = np.eye(4)
+                    axis, v = axis_of(j, where), locked[jname]
+                    if jtype == "prismatic":
+                        T_motion[:3, 3] = axis * v
+                    else:
+                        T_motion[:3, :3] = np.asarray(rot_axis_angle(axis, v))
+                    T_body_joint = T_body_joint @ T_motion
                 frame_names.append(child)
                 frame_parents.append(body)
                 frame_T.append(T_body_joint)
                 visit(child, body, T_body_joint)
                 continue
-            axis_el = j.find("axis")
-            axis = _floats(axis_el.get("xyz"), 3, f"{where} <axis xyz>") if axis_el is not None else np.array([1.0, 0, 0])
-            if np.linalg.norm(axis) == 0:
-                raise URDFError(f"{where}: <axis xyz> must be non-zero")
+            axis = axis_of(j, where)
             lim = j.find("limit")
             if jtype in ("revolute", "prismatic") and lim is None:
                 raise URDFError(f"{where}: a {jtype} joint needs a <limit lower upper effort velocity>")
@@ -217,46 +400,38 @@ def _from_element(root, fname, gravity) -> Robot:
             types.append(_MOVING[jtype])
             Rs.append(T_body_joint[:3, :3])
             ps.append(T_body_joint[:3, 3])
-            axes.append(axis / np.linalg.norm(axis))
+            axes.append(axis)
             inertia.append(np.zeros(10))
             lims.append((lo, hi, vel, eff))
             visit(child, idx, np.eye(4))
 
-    visit(roots[0], -1, np.eye(4))
+    visit(root_link, -1, np.eye(4))
     if not joint_names:
-        raise URDFError(f"{fname}: no moving joints (revolute, continuous or prismatic)")
-    for i, pi in enumerate(inertia):
-        try:
-            check_inertia(pi, f"{fname}: link '{link_names[i]}' (with merged fixed children)")
-        except ParameterError as exc:
-            raise URDFError(str(exc)) from None
+        raise URDFError(
+            f"{fname}: no moving joints (revolute, continuous or prismatic)" + (" left after lock/joints" if locked else "")
+        )
     lims = np.array(lims)
     try:
-        return _make(fname, joint_names, link_names, parents, types, Rs, ps, axes, inertia, gravity, lims,
-                     frame_names, frame_parents, frame_T, roots[0])
+        return make_robot(
+            joint_names=joint_names,
+            link_names=link_names,
+            parents=parents,
+            joint_types=types,
+            placement_R=np.stack(Rs),
+            placement_p=np.stack(ps),
+            axis=np.stack(axes),
+            inertia=np.stack(inertia),
+            gravity=gravity,
+            lower=lims[:, 0],
+            upper=lims[:, 1],
+            velocity_limit=lims[:, 2],
+            effort_limit=lims[:, 3],
+            frame_names=frame_names,
+            frame_parents=frame_parents,
+            frame_R=np.stack([T[:3, :3] for T in frame_T]) if frame_T else None,
+            frame_p=np.stack([T[:3, 3] for T in frame_T]) if frame_T else None,
+            base_name=root_link,
+            check_physical=False,  # each link was checked above, by name (a sum of physical bodies is physical)
+        )
     except ParameterError as exc:
         raise URDFError(f"{fname}: {exc}") from None
-
-
-def _make(fname, joint_names, link_names, parents, types, Rs, ps, axes, inertia, gravity, lims,
-          frame_names, frame_parents, frame_T, base_name):
-    return make_robot(
-        joint_names=joint_names,
-        link_names=link_names,
-        parents=parents,
-        joint_types=types,
-        placement_R=np.stack(Rs),
-        placement_p=np.stack(ps),
-        axis=np.stack(axes),
-        inertia=np.stack(inertia),
-        gravity=gravity,
-        lower=lims[:, 0],
-        upper=lims[:, 1],
-        velocity_limit=lims[:, 2],
-        effort_limit=lims[:, 3],
-        frame_names=frame_names,
-        frame_parents=frame_parents,
-        frame_R=np.stack([T[:3, :3] for T in frame_T]) if frame_T else None,
-        frame_p=np.stack([T[:3, 3] for T in frame_T]) if frame_T else None,
-        base_name=base_name,
-    )

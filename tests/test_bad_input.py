@@ -33,7 +33,7 @@ def test_good_urdf_loads():
     "old,new,pattern",
     [
         ('<inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.02"/>', "", "l2.*no <inertia>"),
-        ('ixx="0.02" ixy="0" ixz="0" iyy="0.02"', 'ixx="0.02" ixy="0.5" ixz="0" iyy="0.02"', "l2.*positive definite"),
+        ('ixx="0.02" ixy="0" ixz="0" iyy="0.02"', 'ixx="0.02" ixy="0.5" ixz="0" iyy="0.02"', "l2.*positive semi-definite"),  # strict=True: by default a warning
         ('<mass value="2.0"/>', '<mass value="-2.0"/>', "l2.*mass"),
         ('type="prismatic"', 'type="floating"', "j2.*unknown or unsupported joint type 'floating'"),
         ('<parent link="l1"/>', '<parent link="l9"/>', "j2.*parent link 'l9' is not defined"),
@@ -44,7 +44,7 @@ def test_good_urdf_loads():
 def test_urdf_errors_name_the_culprit(old, new, pattern):
     assert old in GOOD_URDF
     with pytest.raises(jflex.URDFError, match=pattern):
-        jflex.from_urdf_string(GOOD_URDF.replace(old, new, 1))
+        jflex.from_urdf_string(GOOD_URDF.replace(old, new, 1), strict=True)
 
 
 def test_urdf_nan_or_inf_limits():

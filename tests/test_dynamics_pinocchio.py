@@ -68,7 +68,7 @@ def test_urdf_robots_match_pinocchio(name, frame):
     from jflex._config import _example_robot_urdf
 
     path = str(_example_robot_urdf(name))
-    robot = jflex.load_urdf(path)
+    robot = jflex.load_urdf(path, mimic="independent")  # the Panda's fingers, as Pinocchio loads them
     model = pin.buildModelFromUrdf(path)
     assert robot.joint_names == tuple(model.names[1:])
     rng = np.random.default_rng(1)
@@ -107,7 +107,7 @@ def test_batched_kernels_match_pinocchio(fuse):
     from jflex._config import _example_robot_urdf
 
     path = str(_example_robot_urdf("panda"))
-    robot = jflex.load_urdf(path)
+    robot = jflex.load_urdf(path, mimic="independent")  # the Panda's fingers, as Pinocchio loads them
     model = pin.buildModelFromUrdf(path)
     data = model.createData()
     rng = np.random.default_rng(3)
