@@ -35,6 +35,7 @@ CSV_COLUMNS = {
     "response": (("time", "torque", "output"), ()),
     "modal": (("frequency", "damping_ratio"), ()),
 }
+_FORMAT_LABEL = {"npz": ".npz", "csv": ".csv", "uff": ".uff/.unv (UFF58)"}
 FRF_QUANTITIES = ("receptance", "mobility", "accelerance")
 
 
@@ -213,8 +214,9 @@ class Dataset(Strict):
             raise _bad("file", "expected a .npz, .csv (torque, response, modal) or .uff/.unv (frf) file, got {got}",
                        at="file", got=repr(self.file))
         if self.kind not in FORMAT_KINDS[fmt]:
+            ok = " or ".join(_FORMAT_LABEL[f] for f, ks in FORMAT_KINDS.items() if self.kind in ks)
             raise _bad("file", "a {kind} data set cannot be a {fmt} file (expected {ok})", at="file", kind=self.kind,
-                       fmt=fmt.upper(), ok=" or ".join(f for f, ks in FORMAT_KINDS.items() if self.kind in ks))
+                       fmt=fmt.upper(), ok=ok)
         csv_only = ("columns", "scale", "units", "delimiter")
         for k in csv_only:
             if fmt != "csv" and getattr(self, k) is not None:

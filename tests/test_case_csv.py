@@ -1,0 +1,213 @@
+"""CSV and UFF58 data sets of a case (issue 16 item 3): a log of motor currents in degrees loads to
+the SI arrays it was made from; a UFF58 FRF set loads to the same H as the NPZ it was written
+from; both run through the diagnosis; `jflex case init` writes a starting case.yaml."""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+import pytest
+import yaml
+
+import jflex
+from jflex.gap import _generate as G
+from jflex.gap import diagnose, load_case
+from jflex.identify import write_uff58
+
+KT, GEAR = 0.35, 80.0  # motor torque constant [N m/A] and gear ratio: tau = KT * GEAR * current
+PREC = 1e-10  # relative precision of the 12-digit CSV / UFF text
+
+
+def _write_log(path, t, q, tau, qd=None, names=("shoulder", "elbow")):
+    """A controller log: time [ms], joint angles [deg], motor currents [A], a text status column."""
+    cols = {"time_ms": 1e3 * t}
+    for j, n in enumerate(names):
+        cols[f"{n}_pos_deg"] = np.rad2deg(q[:, j])
+        if qd is not None:
+            cols[f"{n}_vel_dps"] = np.rad2deg(qd[:, j])
+        cols[f"{n}_current_A"] = tau[:, j] / (KT * GEAR)
+    lines = ["# robot log, exported by the controller", ";".join(list(cols) + ["status"])]
+    for k in range(t.size):
+        lines.append(";".join(f"{cols[c][k]:.12g}" for c in cols) + ";ok")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _csv_entry(name, split, names=("shoulder", "elbow"), rates=False):
+    cols = {"time": "time_ms", "position": {n: f"{n}_pos_deg" for n in names},
+            "torque": {n: f"{n}_current_A" for n in names}}
+    if rates:
+        cols["velocity"] = {n: f"{n}_vel_dps" for n in names}
+    return {"kind": "torque", "file": f"{name}.csv", "split": split, "columns": cols,
+            "scale": {f"{n}_current_A": KT * GEAR for n in names}, "units": {"time": "ms", "position": "deg"}}
+
+
+@pytest.fixture(scope="module")
+def csv_case(tmp_path_factory):
+    """The planted viscous-friction case of the generator, its NPZ logs rewritten as CSV logs."""
+    folder = G.torque_case(tmp_path_factory.mktemp("csv") / "visc", "planar2", ["viscous_friction"], seed=5,
+                           noise=0.01, n_train=1, n_val=1)
+    cfg = yaml.safe_load((folder / "case.yaml").read_text())
+    entries = []
+    for i, d in enumerate(cfg["datasets"]):
+        z = np.load(folder / d["file"])
+        name = pathlib.Path(d["file"]).stem
+        _write_log(folder / f"{name}.csv", z["t"], z["q"], z["tau"], z["qd"] if i == 0 else None)
+        entries.append(_csv_entry(name, d["split"], rates=i == 0))
+    npz = load_case(folder)
+    cfg["datasets"] = entries
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return folder, npz
+
+
+def test_csv_log_loads_to_the_si_arrays(csv_case):
+    folder, npz = csv_case
+    case = load_case(folder)
+    for a, b in zip(case.datasets, npz.datasets):
+        assert a.file.suffix == ".csv" and a.name == b.name and a.split == b.split
+        for k in ("t", "q", "tau"):
+            np.testing.assert_allclose(a.arrays[k], b.arrays[k], rtol=PREC, atol=PREC * np.abs(b.arrays[k]).max())
+    # the train log has rate columns [deg/s]; the validation log has none: central differences
+    np.testing.assert_allclose(case.datasets[0].arrays["qd"], npz.datasets[0].arrays["qd"], rtol=PREC, atol=1e-9)
+    a = case.datasets[1].arrays
+    np.testing.assert_allclose(a["qd"], np.gradient(a["q"], a["t"], axis=0), rtol=1e-12)
+
+
+def test_csv_case_diagnosis_finds_the_planted_friction(csv_case):
+    folder, _ = csv_case
+    truth = yaml.safe_load((folder.parent / "visc.truth.json").read_text())["effects"][0]
+    r = diagnose(folder).result
+    assert r["significant"]
+    assert (r["selected"][0]["effect"], r["selected"][0]["joint"]) == ("viscous_friction", truth["joint"])
+    assert r["gap_after"] < 0.5 * r["gap_before"]
+
+
+def _edit_first(folder, fn):
+    p = folder / "case.yaml"
+    cfg = yaml.safe_load(p.read_text())
+    fn(cfg["datasets"][0])
+    p.write_text(yaml.safe_dump(cfg, sort_keys=False))
+
+
+@pytest.mark.parametrize("edit, err, words", [
+    (lambda d: d["columns"]["position"].update(shoulder="nope"), jflex.ConfigError,
+     ["datasets[0].columns.position.shoulder", "'nope'", "time_ms"]),
+    (lambda d: d["columns"]["position"].pop("elbow"), jflex.ConfigError, ["datasets[0].columns.position", "elbow"]),
+    (lambda d: d["scale"].update(time_s=2.0), jflex.ConfigError, ["datasets[0].scale.time_s"]),
+    (lambda d: d["scale"].update(shoulder_current_A=0), jflex.ConfigError, ["datasets[0].scale.shoulder_current_A"]),
+    (lambda d: d["units"].update(position="grad"), jflex.ConfigError, ["datasets[0].units.position", "deg"]),
+    (lambda d: d.pop("columns"), jflex.ConfigError, ["datasets[0].columns", "missing"]),
+    (lambda d: d["columns"].update(frequency="f"), jflex.ConfigError, ["datasets[0].columns.frequency"]),
+    (lambda d: d.update(kind="frf"), jflex.ConfigError, ["datasets[0].file", "UFF"]),
+    (lambda d: d.update(delimiter=","), jflex.ConfigError, ["datasets[0].columns.time", "not in"]),
+])
+def test_csv_column_map_errors(tmp_path, edit, err, words):
+    t = np.arange(40) / 100.0
+    q = np.column_stack([np.sin(t), np.cos(t)])
+    folder = tmp_path / "c"
+    folder.mkdir()
+    G.write_robot(folder, "planar2")
+    for name in ("a", "b"):
+        _write_log(folder / f"{name}.csv", t, q, q, q)
+    cfg = {"robot": "robot.yaml", "datasets": [_csv_entry("a", "train", rates=True), _csv_entry("b", "validation")]}
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg))
+    load_case(folder)  # the unedited case loads
+    _edit_first(folder, edit)
+    with pytest.raises(err) as e:
+        load_case(folder)
+    for w in words:
+        assert w in str(e.value)
+
+
+def test_csv_bad_cells_name_line_and_column(tmp_path):
+    t = np.arange(40) / 100.0
+    q = np.column_stack([np.sin(t), np.cos(t)])
+    folder = tmp_path / "c"
+    folder.mkdir()
+    G.write_robot(folder, "planar2")
+    _write_log(folder / "a.csv", t, q, q)
+    _write_log(folder / "b.csv", t, q, q)
+    cfg = {"robot": "robot.yaml", "datasets": [_csv_entry("a", "train"), _csv_entry("b", "validation")]}
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg))
+    lines = (folder / "a.csv").read_text().splitlines()
+    cells = lines[5].split(";")
+    cells[2] = "n/a"  # line 6 of the file, shoulder current
+    (folder / "a.csv").write_text("\n".join(lines[:5] + [";".join(cells)] + lines[6:]) + "\n")
+    with pytest.raises(jflex.DataError, match=r"a\.csv: column 'shoulder_current_A', line 6: expected a number, got 'n/a'"):
+        load_case(folder)
+    cells[2] = ""
+    (folder / "a.csv").write_text("\n".join(lines[:5] + [";".join(cells)] + lines[6:]) + "\n")
+    with pytest.raises(jflex.DataError, match=r"column 'shoulder_current_A' .*line 6: empty"):
+        load_case(folder)
+    (folder / "a.csv").write_text("\n".join(lines[:5] + [";".join(cells[:-1])] + lines[6:]) + "\n")
+    with pytest.raises(jflex.DataError, match=r"a\.csv: line 6: 5 fields, the header has 6"):
+        load_case(folder)
+
+
+# --- UFF58 ---------------------------------------------------------------------------------------
+def _write_uff(path, freq, H, quantity="receptance", flip_y=False):
+    """The 9 records of a tool FRF set; ``flip_y``: the response Y axis measured negative."""
+    w = 2j * np.pi * freq
+    factor, unit = {"receptance": (1, "m"), "mobility": (w, "m/s"), "accelerance": (w**2, "m/s^2")}[quantity]
+    blocks = []
+    for o in range(3):
+        for i in range(3):
+            sign = -1 if (flip_y and o == 1) else 1
+            p = path.with_suffix(f".{o}{i}.tmp")
+            write_uff58(p, freq, sign * factor * H[:, o, i], response=(7, sign * (o + 1)), reference=(3, i + 1),
+                        units=("Hz", unit, "N"))
+            blocks.append(p.read_text())
+            p.unlink()
+    path.write_text("".join(blocks))
+
+
+def _frf_folder(tmp_path, freq, H, q0):
+    folder = tmp_path / "frf"
+    folder.mkdir()
+    G.write_robot(folder, "arm3")
+    np.savez(folder / "p.npz", q0=q0, freq=freq, H=H)
+    return folder
+
+
+@pytest.mark.parametrize("quantity, flip", [("receptance", False), ("accelerance", True), ("mobility", False)])
+def test_uff58_set_loads_to_the_npz_receptance(tmp_path, quantity, flip):
+    rng = np.random.default_rng(0)
+    freq = np.linspace(2.0, 60.0, 117)
+    H = (rng.normal(size=(freq.size, 3, 3)) + 1j * rng.normal(size=(freq.size, 3, 3))) * 1e-6
+    q0 = [0.1, 0.7, -1.2]
+    folder = _frf_folder(tmp_path, freq, H, q0)
+    _write_uff(folder / "p.uff", freq, H, quantity, flip)
+    ds = [{"kind": "frf", "file": "p.npz", "split": "train"},
+          {"kind": "frf", "file": "p.uff", "split": "validation", "name": "uff",
+           "q0": {"joint3": -1.2, "joint1": 0.1, "joint2": 0.7}}]
+    (folder / "case.yaml").write_text(yaml.safe_dump({"robot": "robot.yaml", "tool_frame": "tool", "datasets": ds}))
+    a, b = (d.arrays for d in load_case(folder).datasets)
+    np.testing.assert_allclose(b["freq"], a["freq"], rtol=1e-5)  # the UFF header holds 6 digits of f0, df
+    np.testing.assert_allclose(b["H"], a["H"], rtol=PREC if quantity == "receptance" else 1e-5, atol=0)
+    np.testing.assert_allclose(b["q0"], q0)
+
+
+def test_uff58_errors(tmp_path):
+    freq = np.linspace(2.0, 60.0, 30)
+    H = np.ones((freq.size, 3, 3), complex) * 1e-6
+    folder = _frf_folder(tmp_path, freq, H, [0.1, 0.7, -1.2])
+    _write_uff(folder / "p.uff", freq, H)
+    ds = [{"kind": "frf", "file": "p.npz", "split": "train"},
+          {"kind": "frf", "file": "p.uff", "split": "validation", "q0": [0.1, 0.7]}]
+    (folder / "case.yaml").write_text(yaml.safe_dump({"robot": "robot.yaml", "tool_frame": "tool", "datasets": ds}))
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[1\]\.q0': expected 3 angles"):
+        load_case(folder)
+    ds[1]["q0"] = "abc"  # a string posture
+    (folder / "case.yaml").write_text(yaml.safe_dump({"robot": "robot.yaml", "tool_frame": "tool", "datasets": ds}))
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[1\]\.q0': expected a list of numbers"):
+        load_case(folder)
+    ds[1]["q0"] = [0.1, 0.7, -1.2]
+    (folder / "case.yaml").write_text(yaml.safe_dump({"robot": "robot.yaml", "tool_frame": "tool", "datasets": ds}))
+    text = (folder / "p.uff").read_text()
+    blocks = text.split("    -1\n    -1\n")
+    (folder / "p.uff").write_text("    -1\n    -1\n".join(blocks[:-1]) + "    -1\n")  # H[Z, Z] dropped
+    with pytest.raises(jflex.DataError, match=r"p\.uff: no record for \['H\[Z, Z\]'\]"):
+        load_case(folder)
+    (folder / "p.uff").write_text(text.replace("Displacement         m   ", "Displacement         mm  "))
+    with pytest.raises(jflex.DataError, match=r"output unit 'mm'.*datasets\[1\]\.quantity"):
+        load_case(folder)
