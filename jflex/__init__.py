@@ -2,10 +2,15 @@
 
 A model is a rigid core (:class:`Robot`) plus effects; every analysis consumes that model.
 Everything runs in float64 unless ``JFLEX_X64=0`` is set before import.
+
+Public names are loaded on first use (PEP 562): ``import jflex`` costs little beyond ``import
+jax``, and ``jflex.gap``, ``jflex.identify``, ... (SciPy, diffrax, optimistix, matplotlib) load
+when first touched. ``_LAZY`` below is the table of what lives where.
 """
 
 import importlib.metadata as _md
 import os as _os
+import typing as _typing
 
 # XLA:CPU's new fusion emitters recompute shared subexpressions of long elementwise graphs
 # (the rigid-body kernels, MuJoCo MJX) and run them up to 1000x slower (see DESIGN.md and
@@ -47,81 +52,85 @@ from ._errors import (
     SolverError as SolverError,
     URDFError as URDFError,
 )
-from ._runs import (
-    experiment_cli as experiment_cli,
-    load_yaml as load_yaml,
-    make_run_dir as make_run_dir,
-    write_results as write_results,
-)
-from ._robot import Robot as Robot, make_robot as make_robot, check_inertia as check_inertia
-from ._dh import from_dh as from_dh
-from ._urdf import load_urdf as load_urdf, from_urdf_string as from_urdf_string
-from ._dynamics import (
-    aba as aba,
-    crba as crba,
-    forward_dynamics as forward_dynamics,
-    forward_kinematics as forward_kinematics,
-    frame_placement as frame_placement,
-    gravity as gravity,
-    jacobian as jacobian,
-    kinetic_energy as kinetic_energy,
-    nonlinear_effects as nonlinear_effects,
-    potential_energy as potential_energy,
-    regressor as regressor,
-    rnea as rnea,
-)
-from . import effects as effects
-from ._model import (
-    Layout as Layout,
-    Linearization as Linearization,
-    Model as Model,
-    bias_forces as bias_forces,
-    dynamic_stiffness as dynamic_stiffness,
-    gravity_stiffness as gravity_stiffness,
-    initial_state as initial_state,
-    input_matrix as input_matrix,
-    linearize as linearize,
-    mass_matrix as mass_matrix,
-    model_forward_dynamics as model_forward_dynamics,
-    model_inverse_dynamics as model_inverse_dynamics,
-    state_rate as state_rate,
-)
-from ._sweep import batched as batched, sweep as sweep
-from ._allocator import tune_allocator as tune_allocator
-from ._config import (
-    available_robots as available_robots,
-    load_robot as load_robot,
-    robot_from_config as robot_from_config,
-)
-from . import linear as linear
-from .linear import (
-    frf as frf,
-    frf_sweep as frf_sweep,
-    mac as mac,
-    modal_analysis as modal_analysis,
-    stability_lobes as stability_lobes,
-    track_modes as track_modes,
-)
-from . import fem as fem
-from ._inputs import (  # time responses (issue 4)
-    AbstractInput as AbstractInput, Brake as Brake, Chirp as Chirp, Function as Function, Ramp as Ramp,
-    Sampled as Sampled, Step as Step, Zero as Zero,
-)
-from ._simulate import Response as Response, simulate as simulate, total_energy as total_energy
-from ._beam import (
-    Beam as Beam, beam_modal_matrices as beam_modal_matrices, beam_roots as beam_roots,
-    clamped_free_frequencies as clamped_free_frequencies, make_beam as make_beam,
-)
-from ._lagrangian import (
-    lagrangian_bias as lagrangian_bias, lagrangian_forward_dynamics as lagrangian_forward_dynamics,
-    lagrangian_mass_matrix as lagrangian_mass_matrix,
+
+# public name -> (private module, attribute there); a module given as "" is the subpackage itself
+_LAZY_MODULES = {
+    "._runs": ("experiment_cli", "load_yaml", "make_run_dir", "write_results"),
+    "._robot": ("Robot", "make_robot", "check_inertia"),
+    "._dh": ("from_dh",),
+    "._urdf": ("load_urdf", "from_urdf_string"),
+    "._dynamics": (
+        "aba", "crba", "forward_dynamics", "forward_kinematics", "frame_placement", "gravity", "jacobian",
+        "kinetic_energy", "nonlinear_effects", "potential_energy", "regressor", "rnea",
+    ),
+    "._model": (
+        "Layout", "Linearization", "Model", "bias_forces", "dynamic_stiffness", "gravity_stiffness",
+        "initial_state", "input_matrix", "linearize", "mass_matrix", "model_forward_dynamics",
+        "model_inverse_dynamics", "state_rate",
+    ),
+    "._sweep": ("batched", "sweep"),
+    "._allocator": ("tune_allocator",),
+    "._config": ("available_robots", "load_robot", "robot_from_config"),
+    ".linear": ("frf", "frf_sweep", "mac", "modal_analysis", "stability_lobes", "track_modes"),
+    "._inputs": ("AbstractInput", "Brake", "Chirp", "Function", "Ramp", "Sampled", "Step", "Zero"),  # time responses
+    "._simulate": ("Response", "simulate", "total_energy"),
+    "._beam": ("Beam", "beam_modal_matrices", "beam_roots", "clamped_free_frequencies", "make_beam"),
+    "._lagrangian": ("lagrangian_bias", "lagrangian_forward_dynamics", "lagrangian_mass_matrix"),
+}
+_LAZY = {name: (mod, name) for mod, names in _LAZY_MODULES.items() for name in names}
+# subpackages: effects, linear/FRF, FEM, identification (issue 5), sim-to-real gap diagnosis (issue 6)
+_LAZY.update({name: ("." + name, "") for name in ("effects", "linear", "fem", "identify", "gap")})
+_LAZY.update({
+    "seed003_appendix_b_columns": ("._seed003", "appendix_b_columns"),
+    "seed003_realisation_matrix": ("._seed003", "realisation_matrix"),
+    "Seed003Robot": ("._seed003", "Seed003Robot"),
+})
+
+__all__ = sorted(
+    ["ConfigError", "DataError", "JFlexError", "ParameterError", "ShapeError", "SolverError", "URDFError"]
+    + list(_LAZY)
 )
 
-# identification (issue 5): equation-error and output-error fits, EMA helpers
-from . import identify as identify
-from . import gap as gap  # sim-to-real gap diagnosis (issue 6)
-from ._seed003 import (
-    appendix_b_columns as seed003_appendix_b_columns,
-    realisation_matrix as seed003_realisation_matrix,
-    Seed003Robot as Seed003Robot,
-)
+
+def __getattr__(name):
+    try:
+        mod, attr = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'jflex' has no attribute '{name}'") from None
+    import importlib
+
+    module = importlib.import_module(mod, __name__)
+    value = getattr(module, attr) if attr else module
+    globals()[name] = value  # later look-ups skip __getattr__
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+if _typing.TYPE_CHECKING:  # static tools see the eager imports
+    from . import effects, fem, gap, identify, linear
+    from ._allocator import tune_allocator
+    from ._beam import Beam, beam_modal_matrices, beam_roots, clamped_free_frequencies, make_beam
+    from ._config import available_robots, load_robot, robot_from_config
+    from ._dh import from_dh
+    from ._dynamics import (
+        aba, crba, forward_dynamics, forward_kinematics, frame_placement, gravity, jacobian, kinetic_energy,
+        nonlinear_effects, potential_energy, regressor, rnea,
+    )
+    from ._inputs import AbstractInput, Brake, Chirp, Function, Ramp, Sampled, Step, Zero
+    from ._lagrangian import lagrangian_bias, lagrangian_forward_dynamics, lagrangian_mass_matrix
+    from ._model import (
+        Layout, Linearization, Model, bias_forces, dynamic_stiffness, gravity_stiffness, initial_state,
+        input_matrix, linearize, mass_matrix, model_forward_dynamics, model_inverse_dynamics, state_rate,
+    )
+    from ._robot import Robot, check_inertia, make_robot
+    from ._runs import experiment_cli, load_yaml, make_run_dir, write_results
+    from ._seed003 import Seed003Robot
+    from ._seed003 import appendix_b_columns as seed003_appendix_b_columns
+    from ._seed003 import realisation_matrix as seed003_realisation_matrix
+    from ._simulate import Response, simulate, total_energy
+    from ._sweep import batched, sweep
+    from ._urdf import from_urdf_string, load_urdf
+    from .linear import frf, frf_sweep, mac, modal_analysis, stability_lobes, track_modes

@@ -15,7 +15,6 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from scipy.optimize import brentq
 
 from ._errors import ParameterError
 
@@ -50,6 +49,8 @@ def beam_roots(n_modes: int, mass_ratio: float = 0.0, inertia_ratio: float = 0.0
         raise ParameterError(f"n_modes must be >= 1, got {n_modes}")
     if mass_ratio < 0 or inertia_ratio < 0:
         raise ParameterError(f"tip mass ratio and inertia ratio must be >= 0, got {mass_ratio}, {inertia_ratio}")
+    from scipy.optimize import brentq  # here, not at import: scipy.optimize costs ~0.3 s to load
+
     f = lambda b: _char_det(b, mass_ratio, inertia_ratio)
     roots = []
     grid = np.linspace(1e-3, (n_modes + 2) * np.pi, 4000 * (n_modes + 2))

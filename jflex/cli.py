@@ -4,19 +4,67 @@
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
 import importlib.util
 import pathlib
+import re
 import sys
 
 import numpy as np
 
+from . import __version__
 from ._config import available_robots, config_dirs, load_robot, robot_from_config
 from ._errors import JFlexError
 from ._runs import load_yaml, make_run_dir, write_results
 
 _REPO = pathlib.Path(__file__).resolve().parent.parent
 _PLUGINS = ("jflex.gap._cli",)
+
+
+def _load_plugin(name: str):
+    """A plugin module loaded from its file, without running its package's ``__init__`` (the gap
+    package loads SciPy, diffrax and optimistix; ``jflex --help`` needs only the parsers). Its
+    relative imports still resolve: the package itself is imported when a command runs."""
+    parts = name.split(".")
+    path = pathlib.Path(__file__).resolve().parent.joinpath(*parts[1:]).with_suffix(".py")
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or not path.is_file():
+        return importlib.import_module(name)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def experiments() -> dict[str, pathlib.Path]:
+    """``experiments/*.py`` by name: the working directory's first, then the repository's."""
+    found: dict[str, pathlib.Path] = {}
+    for base in (pathlib.Path.cwd() / "experiments", _REPO / "experiments"):
+        if base.is_dir():
+            for path in sorted(base.glob("*.py")):
+                if not path.name.startswith("_"):
+                    found.setdefault(path.stem, path)
+    return dict(sorted(found.items()))
+
+
+def experiment_summary(path: pathlib.Path, width: int = 110) -> str:
+    """The first sentence of a script's docstring, on one line (read, not executed)."""
+    try:
+        doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    except (OSError, SyntaxError, UnicodeDecodeError):
+        return "(docstring unreadable)"
+    para = " ".join(doc.strip().split("\n\n")[0].split())
+    m = re.search(r"(?<=[a-z0-9)\]])\.(\s|$)", para)
+    line = para[: m.start() + 1] if m else para
+    if len(line) > width:
+        line = line[: width - 3].rsplit(" ", 1)[0] + "..."
+    return line or "(no docstring)"
+
+
+def _experiment_table() -> str:
+    ex = experiments()
+    w = max((len(k) for k in ex), default=0)
+    return "\n".join(f"  {k:<{w}}  {experiment_summary(p)}" for k, p in ex.items())
 
 
 def _default_config(name: str) -> pathlib.Path:
@@ -160,13 +208,19 @@ def cmd_demo(args) -> int:
 
 
 def cmd_run(args) -> int:
-    """Run ``experiments/<name>.py`` with the remaining arguments."""
-    for base in (pathlib.Path.cwd() / "experiments", _REPO / "experiments"):
-        path = base / f"{args.experiment}.py"
-        if path.is_file():
-            break
-    else:
-        raise JFlexError(f"no experiment '{args.experiment}' in experiments/")
+    """Run ``experiments/<name>.py`` with the remaining arguments (``--list``: list them)."""
+    if args.list:
+        print(_experiment_table())
+        return 0
+    if args.experiment is None:
+        print("jflex run: name an experiment:\n" + _experiment_table(), file=sys.stderr)
+        return 2
+    path = experiments().get(args.experiment)
+    if path is None:
+        raise JFlexError(
+            f"no experiment '{args.experiment}' in experiments/; available: {', '.join(experiments())} "
+            "(jflex run --list describes them)"
+        )
     spec = importlib.util.spec_from_file_location(f"jflex_experiment_{args.experiment}", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
@@ -178,6 +232,7 @@ def cmd_run(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jflex", description="Differentiable dynamics of flexible manipulators (JAX).")
+    p.add_argument("--version", action="version", version=f"jflex {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     pi = sub.add_parser("info", help="print joints, limits and masses of a robot")
     pi.add_argument("robot", help=f"YAML/URDF path or a name ({', '.join(available_robots())})")
@@ -186,15 +241,21 @@ def build_parser() -> argparse.ArgumentParser:
     pd.add_argument("config", nargs="?", default=None, help="YAML config (default: configs/demo.yaml)")
     pd.add_argument("--out", default=None, help="run folder (default: runs/demo-<time>)")
     pd.set_defaults(fn=cmd_demo)
-    pr = sub.add_parser("run", help="run an experiment script from experiments/")
-    pr.add_argument("experiment")
-    pr.add_argument("rest", nargs=argparse.REMAINDER)
+    pr = sub.add_parser(
+        "run", help="run an experiment script from experiments/ (--list: what each does)",
+        description="Run experiments/<EXPERIMENT>.py; the arguments after its name go to the script "
+        "(each takes [CONFIG] [--out DIR]).", epilog="experiments:\n" + _experiment_table(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    pr.add_argument("--list", action="store_true", help="list the experiments, one line each, and exit")
+    pr.add_argument("experiment", nargs="?", default=None, help="name of a script in experiments/")
+    pr.add_argument("rest", nargs=argparse.REMAINDER, help="arguments passed to the script")
     pr.set_defaults(fn=cmd_run)
     # Subsystems register their own subcommands: each module exposes add_subcommands(sub),
     # whose parsers set ``fn`` like the ones above.
     for mod in _PLUGINS:
         try:
-            module = importlib.import_module(mod)
+            module = _load_plugin(mod)
         except ImportError:
             continue
         module.add_subcommands(sub)
