@@ -211,3 +211,21 @@ def test_uff58_errors(tmp_path):
     (folder / "p.uff").write_text(text.replace("Displacement         m   ", "Displacement         mm  "))
     with pytest.raises(jflex.DataError, match=r"output unit 'mm'.*datasets\[1\]\.quantity"):
         load_case(folder)
+
+
+@pytest.mark.slow
+def test_uff58_case_diagnosis_finds_the_planted_spring(tmp_path, monkeypatch):
+    # the generator's FRF case on an even grid (UFF58 stores f0 + k df), written as UFF files
+    monkeypatch.setattr(G, "FRF_FREQ", np.linspace(3.0, 80.0, 120))
+    folder = G.frf_case(tmp_path / "jf", "arm3", ["joint_flexibility"], seed=7)
+    truth = yaml.safe_load((folder.parent / "jf.truth.json").read_text())["effects"][0]
+    cfg = yaml.safe_load((folder / "case.yaml").read_text())
+    for d in cfg["datasets"]:
+        z = np.load(folder / d["file"])
+        d["file"] = str(pathlib.Path(d["file"]).with_suffix(".uff"))
+        _write_uff(folder / d["file"], z["freq"], z["H"])
+        d["q0"] = [float(v) for v in z["q0"]]
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    r = diagnose(folder).result
+    assert (r["selected"][0]["effect"], r["selected"][0]["joint"]) == ("joint_flexibility", truth["joint"])
+    assert r["significant"] and r["gap_after"] < 0.1 * r["gap_before"]
