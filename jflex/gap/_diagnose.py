@@ -147,11 +147,17 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     verdict_ = verdict(significant, is_significant(ev_cur, floor), bool(sel.steps), shrink_total)
     wh = where(pb, ev0, floor, case)
     moves = link_moves(pb.robot, pb.inertia.pi0, nom.tfit.delta, pb.inertia) if pb.inertia is not None else []
+    inertia_note = ("not refitted (no torque training data, or the case holds it: options.refit_inertia)"
+                    if pb.inertia_gain is None else
+                    f"refitted (training information gain {pb.inertia_gain:.0f} over the base parameters' cost)"
+                    if pb.inertia is not None else
+                    f"CAD kept: a refit does not pay for its base parameters on the training data (gain {pb.inertia_gain:.0f})")
     result = dict(
         case=str(case.path), verdict=verdict_, stop_reason=stop_reason(sel, pb.names),
         gap_before=gap0, gap_after=gap_after, noise_floor=fl,
         noise_floor_per_dataset=floor, noise_floor_source=floor_source, excess_before=exc0, excess_after=exc_after,
-        shrink=shrink_total, inertia_refit=moves,
+        shrink=shrink_total, inertia_refit=moves, inertia=inertia_note,
+
         processing={s_.name: s_.processing for s_ in pb.ttrain + pb.tval if s_.processing},
         significant=bool(significant), remaining_significant=bool(is_significant(ev_cur, floor)),
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,

@@ -18,7 +18,7 @@ from . import _response as R
 from . import _torque as T
 
 TORQUE_EFFECTS = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
-                  "backlash", "payload", "sensor_delay")
+                  "backlash", "payload", "sensor_delay", "joint_flexibility")
 LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "hysteretic_damping",
                   "fractional_damping", "payload")
 # pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
@@ -67,6 +67,8 @@ class Problem:
     def __init__(self, case: Case, candidates=()):
         self.case = case
         self.robot = case.robot
+        self.lin_robot = self.robot  # the robot of the linear (FRF/modal) models: CAD, or as identified
+        self.inertia_gain = None  # training BIC gain of the inertial refit (<= 0: CAD kept)
         self.names = tuple(self.robot.joint_names)
         self.n = self.robot.nq
         # responses whose channels hold every model joint enter as equation-error (torque) sets
@@ -120,11 +122,22 @@ class Problem:
                 terms.append(T.Term("sensor_delay", None, delay))
         tfit = None
         if self.ttrain:
-            # twice: the prior's weight is relative to the residual level of the fit itself
-            tfit = T.fit_terms(tuple(terms), delay, self.ttrain, self.inertia)
+            held = T.fit_terms(tuple(terms), delay, self.ttrain)
+            tfit = held
             if self.inertia is not None:
+                # twice: the prior's weight is relative to the residual level of the fit itself
+                self.inertia.sigma = T.with_inertia_sigma(held, self.ttrain)
+                tfit = T.fit_terms(tuple(terms), delay, self.ttrain, self.inertia)
                 self.inertia.sigma = T.with_inertia_sigma(tfit, self.ttrain)
                 tfit = T.fit_terms(tuple(terms), delay, self.ttrain, self.inertia)
+                # the refit must pay for the base parameters it frees (training BIC); CAD that
+                # the data cannot fault is kept as it is (a refit to noise would only add noise)
+                rows = sum(s.tau.size for s in self.ttrain)
+                gain = rows * np.log(max(held.cost, 1e-300) / max(tfit.cost, 1e-300))
+                self.inertia_gain = float(gain - T.inertia_rank(self.ttrain) * np.log(rows))
+                if self.inertia_gain <= 0:
+                    self.inertia = None
+                    tfit = held
         lm = x = None
         if self.ftrain or self.fval:
             springs, x0 = [], []
@@ -146,8 +159,11 @@ class Problem:
             ks = np.concatenate([a for a, _ in x0]) if x0 else np.zeros(0)
             cs = np.concatenate([b for _, b in x0]) if x0 else np.zeros(0)
             structure = L.LinearStructure(tuple(springs), payload=False)
-            lm = L.LinearModel(self.robot, structure, self.case.tool_frame)
             x = np.concatenate([ks, cs])
+            if tfit is not None and tfit.delta is not None:
+                # the torque data identified the inertial parameters: the linear model uses them
+                self.lin_robot = self.robot.replace(inertia=np.asarray(self.robot.inertia) + tfit.delta.reshape(self.n, 10))
+            lm = L.LinearModel(self.lin_robot, structure, self.case.tool_frame)
             if self.ftrain and len(springs):
                 x, _ = L.fit_linear(lm, x, self.ftrain)
         return State(tfit, lm, x)
@@ -184,7 +200,7 @@ class Problem:
                         out.append(Candidate("fractional_damping", j))
             if "payload" not in nom and not self.ttrain:
                 out.append(Candidate("payload", None))
-        return out
+        return list(dict.fromkeys(out))
 
     def _nominal_springs(self):
         return [L.Spring("joint", self.names.index(j)) for e in self.nominal_effects
@@ -222,7 +238,7 @@ class Problem:
             def fit_alpha(a):
                 sp = list(springs)
                 sp[i] = dataclasses.replace(sp[i], law=law, alpha=round(float(a), 3))
-                lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+                lm2 = L.LinearModel(self.lin_robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
                 lm2._cache = lm._cache  # same geometry and postures: the matrices carry over
                 x2 = np.array(x, float)
                 w = 2 * np.pi * self._ref_freq()
@@ -270,7 +286,7 @@ class Problem:
             return lm2, xf
         if cand.effect == "payload":
             st2 = L.LinearStructure(tuple(springs), True)
-            lm2 = L.LinearModel(self.robot, st2, self.case.tool_frame)
+            lm2 = L.LinearModel(self.lin_robot, st2, self.case.tool_frame)
             xs = [np.concatenate([ks, cs, [np.log(m)], cpl]) for m in (0.1, 1.0, 10.0)]
             xf, _ = L.fit_linear(lm2, xs[0], self.ftrain, starts=xs[1:])
             return lm2, xf
@@ -282,7 +298,7 @@ class Problem:
         else:
             new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1, coupled=True)]
         sp = springs + new
-        lm2 = L.LinearModel(self.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+        lm2 = L.LinearModel(self.lin_robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
         # starting stiffnesses: the new spring(s) alone would put a mode at f_t; f_t is scanned over a
         # log grid from below the measured band to well above it (a compliance whose modes lie
         # above the band shows only as a posture-dependent static softening), both springs of a

@@ -106,6 +106,8 @@ def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     for j in flex:
         p["rotor"][j] = 0.0  # on the motor side of the spring
     inert = np.asarray(robot.inertia, float).copy()
+    if tfit is not None and tfit.delta is not None:
+        inert += tfit.delta.reshape(inert.shape)  # the nominal identification's inertial parameters
     inert[n - 1] += pay
     eff = FittedTorques(*(jnp.asarray(p[k]) for k in ("viscous", "coulomb", "stribeck")), jnp.asarray(vel),
                         jnp.asarray(p["rotor"]), jnp.asarray(comp), jnp.asarray(T.EPS_SIGN))

@@ -49,7 +49,7 @@ SIGNATURE_NAMES = {
     "stribeck_friction": "sign of velocity, larger at low speed", "rotor_inertia": "correlation with joint acceleration",
     "gravity_compensator": "posture harmonics of the joint angle", "backlash": "dead zone at reversals (held sign x gravity stiffness)",
     "payload": "tool-mass regressor columns", "sensor_delay": "phase lag: correlation with d tau/dt",
-    "joint_flexibility": "extra FRF peak / unmatched mode", "orthogonal_compliance": "extra FRF peak / unmatched mode",
+    "joint_flexibility": "extra FRF peak / unmatched mode; in torques, the link lagging under load (tau_j / k)", "orthogonal_compliance": "extra FRF peak / unmatched mode",
     "link_flexibility": "extra FRF peak / unmatched mode", "hysteretic_damping": "damping ratio flat in frequency",
     "fractional_damping": "damping ratio growing as w^(alpha-1)",
 }

@@ -224,6 +224,44 @@ def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
     return s.cache[key]
 
 
+@jax.jit
+def _jvp_batch(robot, q, qd, qdd, dq, dqd, dqdd):
+    f = lambda a, b, c: rnea(robot, a, b, c)
+    return jax.vmap(lambda *x: jax.jvp(f, x[:3], x[3:])[1])(q, qd, qdd, dq, dqd, dqdd)
+
+
+def smooth_torque(s: TorqueSet) -> np.ndarray:
+    """The measured torque, low-passed (the set's own filter, else one at CUTOFF_FACTOR x the
+    motion band): what a column built from the torque itself may differentiate."""
+    if s.cutoff is not None:
+        return s.tau
+    if "smooth_tau" not in s.cache:
+        h = float(np.mean(np.diff(s.t)))
+        fc = min(CUTOFF_FACTOR * motion_band(s.q, h), 0.4 / h)
+        s.cache["smooth_tau"] = zero_phase_lowpass(s.tau, h, fc)
+    return s.cache["smooth_tau"]
+
+
+def compliance_column(s: TorqueSet, j: int) -> np.ndarray:
+    """(N, n) torque change per unit compliance ``1/k`` of a flexible joint ``j`` whose motor-side
+    angle is what the encoder measured: the link lags it by the deflection ``tau_j / k`` (the
+    measured joint torque, as the spring passes it on), so to first order in the compliance the
+    rigid torques change by minus RNEA's directional derivative along ``e_j (tau_j, dtau_j/dt,
+    d2tau_j/dt2)`` (the quasi-static deflection of :class:`jflex.effects.FlexibleJoints`; its own
+    damping and the motor's inertia are left out: the latter is ``rotor_inertia``)."""
+    key = ("compliance", j)
+    if key not in s.cache:
+        tj = smooth_torque(s)[:, j]
+        tjd = np.gradient(tj, s.t)
+        tjdd = np.gradient(tjd, s.t)
+        d = [np.zeros_like(s.q) for _ in range(3)]
+        for k, v in enumerate((tj, tjd, tjdd)):
+            d[k][:, j] = v
+        args = [jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]
+        s.cache[key] = -np.asarray(_jvp_batch(s.robot, *args))
+    return s.cache[key]
+
+
 def held_sign(v, tol):
     """sign(v) held through stretches where |v| < tol (the side of the last motion)."""
     s = np.sign(v) * (np.abs(v) >= tol)
@@ -257,7 +295,7 @@ class Term:
 
     @property
     def n_params(self) -> int:
-        return {"stribeck_friction": 2, "gravity_compensator": 4, "payload": 10, "sensor_delay": 0,
+        return {"stribeck_friction": 2, "gravity_compensator": 4, "payload": 10, "sensor_delay": 0, "joint_flexibility": 1,
                 "backlash": 1 + len(BACKLASH_PULSES)}.get(self.effect, 1)
 
     def bounds(self):
@@ -269,6 +307,7 @@ class Term:
         return {
             "viscous_friction": ["Fv [N m s/rad]"], "coulomb_friction": ["Fc [N m]"],
             "stribeck_friction": ["Fc [N m]", "Fs-Fc [N m]"], "rotor_inertia": ["Ia [kg m^2]"],
+            "joint_flexibility": ["compliance 1/k [rad/(N m)]"],
             "gravity_compensator": ["B_cos1 [N m]", "B_sin1 [N m]", "B_cos2 [N m]", "B_sin2 [N m]"],
             "payload": ["m [kg]", "m cx [kg m]", "m cy [kg m]", "m cz [kg m]", "Ixx [kg m^2]", "Ixy [kg m^2]",
                         "Iyy [kg m^2]", "Ixz [kg m^2]", "Iyz [kg m^2]", "Izz [kg m^2]"],
@@ -290,6 +329,8 @@ class Term:
             sg = np.tanh(s.qd[:, j] / EPS_SIGN)
             out[:, j, 0] = sg
             out[:, j, 1] = np.exp(-((s.qd[:, j] / self.hyper) ** 2)) * sg
+        elif e == "joint_flexibility":
+            out[:, :, 0] = compliance_column(s, j)
         elif e == "rotor_inertia":
             out[:, j, 0] = s.qdd[:, j]
         elif e == "gravity_compensator":
@@ -412,6 +453,16 @@ def predict(fit: TorqueFit, s: TorqueSet) -> np.ndarray:
     if fit.delta is not None:
         pred = pred + _filtered(s, "Y") @ fit.delta
     return shift(pred, s.t, fit.delay)
+
+
+def inertia_rank(sets) -> int:
+    """Number of inertial parameter combinations the sets excite (the base parameters they see)."""
+    G = sum(s.cache["Yw"][1] for s in sets if "Yw" in s.cache)
+    if np.ndim(G) == 0:
+        return 0
+    d = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    ev = np.linalg.eigvalsh(G / d[:, None] / d[None, :])
+    return int(np.sum(ev > 1e-10 * ev.max()))
 
 
 def with_inertia_sigma(fit: TorqueFit, sets) -> float:
