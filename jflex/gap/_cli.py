@@ -1,4 +1,5 @@
-"""``jflex diagnose`` and ``jflex gap-bench`` subcommands (added to the ``jflex`` parser)."""
+"""``jflex diagnose``, ``jflex case init`` and ``jflex gap-bench`` subcommands (added to the
+``jflex`` parser)."""
 
 from __future__ import annotations
 
@@ -9,12 +10,14 @@ from .._runs import make_run_dir
 
 
 def _diagnose(args) -> int:
+    from ._case import load_case
     from ._diagnose import diagnose
     from ._report import write_report
 
     try:
+        case = load_case(args.case, allow_outside=args.allow_outside)
         run_dir = make_run_dir("diagnose", args.out)
-        diag = diagnose(args.case, max_effects=args.max_effects, progress=lambda s: print(s, flush=True))
+        diag = diagnose(case, max_effects=args.max_effects, progress=lambda s: print(s, flush=True))
     except JFlexError as exc:
         print(f"jflex diagnose: {exc}", file=sys.stderr)
         return 2
@@ -23,6 +26,18 @@ def _diagnose(args) -> int:
     print(f"gap {r['gap_before']:.2f} % -> {r['gap_after']:.2f} % (noise floor {r['noise_floor']:.2f} %); "
           f"selected: {[s['effect'] + ('@' + s['joint'] if s['joint'] else '') for s in r['selected']] or 'nothing'}")
     print(f"report: {path}")
+    return 0
+
+
+def _case_init(args) -> int:
+    from ._case_init import case_init
+
+    try:
+        path = case_init(args.robot, args.log, args.out)
+    except JFlexError as exc:
+        print(f"jflex case init: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {path}: check the guessed columns and fill in every TODO (see the comments at its top)")
     return 0
 
 
@@ -37,15 +52,37 @@ def _bench(args) -> int:
     return 0
 
 
+# what each --size runs (jflex.gap._bench.plan; tests/test_gap_bench_cli.py keeps the counts honest)
+BENCH_SIZES = (
+    "Withheld-effect bench of the gap diagnosis: cases are generated with hidden effects, diagnosed "
+    "without them, and scored. --size full (the default) runs 44 cases: 8 torque-side effects on 3 robots "
+    "(arm3, planar2, arm4: 24), 4 MuJoCo-simulated (arm3), 4 effect pairs, 6 FRF-side effects, and 6 null "
+    "cases (4 torque, 2 FRF). --size small runs 16: the 8 torque-side effects, the 4 MuJoCo cases, 1 pair "
+    "and 1 FRF-side effect on arm3, and 2 null cases (arm3, planar2). Without mujoco installed the MuJoCo "
+    "cases are skipped with a note. Reruns into the same --out resume."
+)
+
+
 def add_subcommands(sub) -> None:
     """Add ``diagnose`` and ``gap-bench`` to the ``jflex`` subparsers."""
     p = sub.add_parser("diagnose", help="sim-to-real gap diagnosis of a case folder (case.yaml)")
     p.add_argument("case", help="case folder or its case.yaml (format: docs/case_format.md)")
     p.add_argument("--out", default=None, help="run folder (default: a fresh runs/diagnose-<time>)")
-    p.add_argument("--max-effects", type=int, default=3, help="most effects to add (default 3)")
+    p.add_argument("--max-effects", type=int, default=None,
+                   help="most effects to add (default: the case's options.max_effects, 3)")
+    p.add_argument("--allow-outside", action="store_true",
+                   help="let case.yaml's robot and file paths leave the case folder (absolute paths, '..')")
     p.set_defaults(fn=_diagnose)
-    b = sub.add_parser("gap-bench", help="withheld-effect bench of the gap diagnosis")
-    b.add_argument("--size", choices=("small", "full"), default="full", help="small: the CI version (a few cases)")
+    c = sub.add_parser("case", help="case folders: 'jflex case init ROBOT LOG.csv' writes a starting case.yaml")
+    csub = c.add_subparsers(dest="case_command", required=True)
+    ci = csub.add_parser("init", help="a starting case.yaml from the robot's joints and a CSV log's header")
+    ci.add_argument("robot", help="a URDF or robot YAML file, or a config name (e.g. panda)")
+    ci.add_argument("log", help="the CSV log (header line of column names)")
+    ci.add_argument("--out", default=None, help="case folder (default: the log's folder); the log is copied there")
+    ci.set_defaults(fn=_case_init)
+    b = sub.add_parser("gap-bench", help="withheld-effect bench of the gap diagnosis", description=BENCH_SIZES)
+    b.add_argument("--size", choices=("small", "full"), default="full",
+                   help="full (the default): 44 cases; small: 16 (the CI size); see above")
     b.add_argument("--limit", type=int, default=None, help="run only the first N cases")
     b.add_argument("--out", default=None, help="run folder (default: a fresh runs/gap-bench-<time>); reruns resume")
     b.set_defaults(fn=_bench)

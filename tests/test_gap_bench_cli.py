@@ -1,0 +1,48 @@
+"""`jflex gap-bench`: its --help says what each --size runs (checked against the plan), and without
+mujoco installed the MuJoCo family is skipped with one line instead of a ModuleNotFoundError."""
+
+import collections
+import re
+import sys
+
+from jflex.gap import _bench
+from jflex.gap._cli import BENCH_SIZES
+
+
+def _counts(size):
+    plan = _bench.plan(size)
+    kinds = collections.Counter(
+        (c["family"], "null" if not c["truths"] else "pair" if len(c["truths"]) > 1 else "one") for c in plan
+    )
+    return len(plan), kinds
+
+
+def test_help_states_what_each_size_runs():
+    n_full, full = _counts("full")
+    n_small, small = _counts("small")
+    text = " ".join(BENCH_SIZES.split())
+    assert f"--size full (the default) runs {n_full} cases" in text
+    assert f"8 torque-side effects on 3 robots (arm3, planar2, arm4: {full['torque', 'one']})" in text
+    assert f"{full['mujoco', 'one']} MuJoCo-simulated" in text and f"{full['torque', 'pair']} effect pairs" in text
+    assert f"{full['frf', 'one']} FRF-side effects" in text
+    nulls = full["torque", "null"] + full["frf", "null"]
+    assert f"{nulls} null cases ({full['torque', 'null']} torque, {full['frf', 'null']} FRF)" in text
+    assert f"--size small runs {n_small}: the {small['torque', 'one']} torque-side effects, the {small['mujoco', 'one']} MuJoCo" in text
+    assert f"{small['torque', 'pair']} pair and {small['frf', 'one']} FRF-side effect on arm3, and {small['torque', 'null']} null" in text
+    from jflex.cli import build_parser
+
+    sub = next(a for a in build_parser()._subparsers._group_actions if a.choices and "gap-bench" in a.choices)
+    helptext = sub.choices["gap-bench"].format_help()
+    assert re.search(rf"full \(the default\): {n_full} cases; small: {n_small}", " ".join(helptext.split()))
+
+
+def test_without_mujoco_the_family_is_skipped_in_one_line(monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco -> ImportError, as when not installed
+    lines = []
+    specs = _bench.runnable(_bench.plan("small"), lines.append)
+    n_mujoco = sum(c["family"] == "mujoco" for c in _bench.plan("small"))
+    assert n_mujoco > 0 and len(specs) == len(_bench.plan("small")) - n_mujoco
+    assert all(c["family"] != "mujoco" for c in specs)
+    assert len(lines) == 1 and "MuJoCo family skipped" in lines[0] and "mujoco is not installed" in lines[0]
+    # ids stay those of the full plan, so a later run with mujoco resumes the same folders
+    assert {c["id"] for c in specs} <= {c["id"] for c in _bench.plan("small")}
