@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 import jflex
-from jflex.gap import _generate as G
+from jflex_family import generate as G
 from jflex.gap import diagnose, load_case
 from jflex.identify import write_uff58
 

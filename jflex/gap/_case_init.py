@@ -1,0 +1,130 @@
+"""``jflex case init ROBOT LOG.csv``: a starting case.yaml from the robot's joint names and a
+log's CSV header. Columns are matched by name where they can be (time; per joint its position,
+velocity and torque or motor current); whatever is not found is left as a ``TODO`` placeholder,
+which :func:`jflex.gap.load_case` refuses by field until it is filled in."""
+
+from __future__ import annotations
+
+import pathlib
+import re
+import shutil
+
+import yaml
+
+from .._config import load_robot
+from .._errors import ConfigError
+from ._csv import Table
+
+TIME_WORDS = ("time", "t", "timestamp", "stamp", "sec", "secs")
+# role -> header words that name it (a word is a maximal run of letters)
+ROLE_WORDS = {
+    "velocity": ("velocity", "vel", "qd", "dq", "speed", "omega", "rate", "dps"),
+    "torque": ("torque", "tau", "effort", "trq", "current", "cur", "curr", "i", "amp", "amps"),
+    "position": ("position", "pos", "angle", "q", "theta", "enc"),
+}
+CURRENT_WORDS = ("current", "cur", "curr", "i", "amp", "amps")
+TODO = "TODO"
+
+
+def _words(name: str) -> list[str]:
+    return re.findall(r"[a-z]+|\d+", name.lower())
+
+
+def _joint_of(col: str, joints: list[str]) -> str | None:
+    """The joint a header names: by its name, else by its number (``q3``: the third joint, or the
+    joint whose name ends in 3)."""
+    flat = re.sub(r"[^a-z0-9]", "", col.lower())
+    by_name = [j for j in joints if re.sub(r"[^a-z0-9]", "", j.lower()) in flat]
+    if len(by_name) == 1:
+        return by_name[0]
+    if len(by_name) > 1:  # 'joint1' in 'joint12': the longest name wins
+        return max(by_name, key=len)
+    nums = [w for w in _words(col) if w.isdigit()]
+    if len(nums) != 1:
+        return None
+    k = int(nums[0])
+    ends = [j for j in joints if re.search(rf"(?<!\d){k}$", j)]
+    if len(ends) == 1:
+        return ends[0]
+    return joints[k - 1] if 1 <= k <= len(joints) else None
+
+
+def guess_columns(header: list[str], joints: list[str]) -> dict:
+    """``{time, position, velocity, torque, current: [columns], units}`` guessed from ``header``."""
+    out = {"time": None, "position": {}, "velocity": {}, "torque": {}, "current": [], "units": {}}
+    for col in header:
+        words = [w for w in _words(col) if not w.isdigit()]
+        if out["time"] is None and any(w in TIME_WORDS for w in words) and _joint_of(col, joints) is None:
+            out["time"] = col
+            if "ms" in words:
+                out["units"]["time"] = "ms"
+            continue
+        role = next((r for r, ws in ROLE_WORDS.items() if any(w in ws for w in words)), None)
+        j = _joint_of(col, joints)
+        if role is None or j is None or j in out[role]:
+            continue
+        out[role][j] = col
+        if role == "torque" and any(w in CURRENT_WORDS for w in words):
+            out["current"].append(col)
+        if role == "position" and "deg" in words:
+            out["units"]["position"] = "deg"
+    return out
+
+
+def case_init(robot: str, log: str | pathlib.Path, out: str | pathlib.Path | None = None) -> pathlib.Path:
+    """Write ``case.yaml`` for the CSV ``log`` and the robot ``robot`` (a URDF / robot YAML file
+    or a config name) into ``out`` (default: the log's folder), copying the log and the robot file
+    there when they lie elsewhere. Refuses to overwrite a case.yaml.
+
+    **Returns:** the path of the written case.yaml.
+    """
+    log = pathlib.Path(log)
+    folder = pathlib.Path(out) if out is not None else log.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    target = folder / "case.yaml"
+    if target.exists():
+        raise ConfigError(f"{target}: exists already (jflex case init does not overwrite a case)")
+    rob = load_robot(robot)
+    joints = list(rob.joint_names)
+    table = Table(log)
+    g = guess_columns(table.header, joints)
+
+    def local(p: pathlib.Path) -> str:
+        if p.resolve().parent != folder.resolve():
+            shutil.copy2(p, folder / p.name)
+        return p.name
+
+    rpath = pathlib.Path(robot)
+    robot_entry = local(rpath) if rpath.suffix.lower() in (".urdf", ".yaml", ".yml") else str(robot)
+    todo = []
+
+    def per_joint(role, what):
+        m = {}
+        for j in joints:
+            m[j] = g[role].get(j, f"{TODO}: column of {j} {what}")
+            if j not in g[role]:
+                todo.append(f"columns.{role}.{j}")
+        return m
+
+    columns = {"time": g["time"] or f"{TODO}: time column", "position": per_joint("position", "angle"),
+               "torque": per_joint("torque", "torque or motor current")}
+    if g["time"] is None:
+        todo.append("columns.time")
+    if len(g["velocity"]) == len(joints):
+        columns["velocity"] = {j: g["velocity"][j] for j in joints}
+    entry = {"kind": "torque", "file": local(log), "split": "train", "columns": columns}
+    if g["current"]:
+        entry["scale"] = {c: 1.0 for c in g["current"]}
+        todo.append("scale (torque constant [N m/A] x gear ratio of each motor current column)")
+    entry["units"] = {"time": g["units"].get("time", "s"), "position": g["units"].get("position", "rad")}
+    cfg = {"robot": robot_entry, "nominal_effects": [], "datasets": [entry]}
+    head = [
+        f"# case.yaml written by 'jflex case init' for {log.name} (format: docs/case_format.md).",
+        f"# Robot joints: {joints}; CSV columns: {table.header}.",
+        "# Check the guessed column map and units; fill in every TODO:",
+        *[f"#   - datasets[0].{t}" for t in todo],
+        "#   - a validation data set: another log with split: validation (the gap is judged on held-out data)",
+        "#   - nominal_effects: what the nominal model already contains (e.g. {effect: viscous_friction, joint: all})",
+    ]
+    target.write_text("\n".join(head) + "\n" + yaml.safe_dump(cfg, sort_keys=False))
+    return target
