@@ -5,6 +5,8 @@ from; both run through the diagnosis; `jflex case init` writes a starting case.y
 from __future__ import annotations
 
 import pathlib
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -216,8 +218,8 @@ def test_uff58_errors(tmp_path):
 @pytest.mark.slow
 def test_uff58_case_diagnosis_finds_the_planted_spring(tmp_path, monkeypatch):
     # the generator's FRF case on an even grid (UFF58 stores f0 + k df), written as UFF files
-    monkeypatch.setattr(G, "FRF_FREQ", np.linspace(3.0, 80.0, 120))
-    folder = G.frf_case(tmp_path / "jf", "arm3", ["joint_flexibility"], seed=7)
+    monkeypatch.setattr(G, "FRF_FREQ", np.linspace(3.0, 80.0, 80))
+    folder = G.frf_case(tmp_path / "jf", "arm3", ["joint_flexibility"], seed=7, n_post=2)
     truth = yaml.safe_load((folder.parent / "jf.truth.json").read_text())["effects"][0]
     cfg = yaml.safe_load((folder / "case.yaml").read_text())
     for d in cfg["datasets"]:
@@ -229,3 +231,47 @@ def test_uff58_case_diagnosis_finds_the_planted_spring(tmp_path, monkeypatch):
     r = diagnose(folder).result
     assert (r["selected"][0]["effect"], r["selected"][0]["joint"]) == ("joint_flexibility", truth["joint"])
     assert r["significant"] and r["gap_after"] < 0.1 * r["gap_before"]
+
+
+# --- jflex case init -------------------------------------------------------------------------------
+def test_case_init_guesses_the_column_map(tmp_path):
+    t = np.arange(40) / 100.0
+    q = np.column_stack([np.sin(t), np.cos(t)])
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    _write_log(logs / "run1.csv", t, q, q, q)
+    G.write_robot(logs, "planar2")
+    out = tmp_path / "case"
+    r = subprocess.run([sys.executable, "-m", "jflex.cli", "case", "init", str(logs / "robot.yaml"), str(logs / "run1.csv"),
+                        "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    text = (out / "case.yaml").read_text()
+    cfg = yaml.safe_load(text)
+    d = cfg["datasets"][0]
+    assert cfg["robot"] == "robot.yaml" and (out / "robot.yaml").is_file() and (out / "run1.csv").is_file()
+    assert d["columns"] == _csv_entry("run1", "train", rates=True)["columns"]
+    assert d["units"] == {"time": "ms", "position": "deg"}
+    # the motor currents' scale is the user's to give: 1.0 and a TODO
+    assert d["scale"] == {"shoulder_current_A": 1.0, "elbow_current_A": 1.0} and "datasets[0].scale" in text
+    # add the validation log the comments ask for: the case loads
+    cfg["datasets"].append(dict(d, file="run1.csv", split="validation", name="val"))
+    (out / "case.yaml").write_text(yaml.safe_dump(cfg))
+    assert len(load_case(out).datasets) == 2
+    # a second init does not overwrite it
+    from jflex.gap._case_init import case_init
+
+    with pytest.raises(jflex.ConfigError, match="exists already"):
+        case_init(logs / "robot.yaml", logs / "run1.csv", out)
+
+
+def test_case_init_leaves_todo_where_it_cannot_guess(tmp_path):
+    from jflex.gap._case_init import case_init
+
+    G.write_robot(tmp_path, "planar2")
+    (tmp_path / "log.csv").write_text("stamp,a1,a2,motor_i_1\n0,0,0,0\n0.01,0,0,0\n")
+    cfg = yaml.safe_load(case_init(tmp_path / "robot.yaml", tmp_path / "log.csv").read_text())
+    cols = cfg["datasets"][0]["columns"]
+    assert cols["time"] == "stamp" and cols["torque"]["shoulder"] == "motor_i_1"
+    assert cols["position"]["shoulder"].startswith("TODO") and cols["torque"]["elbow"].startswith("TODO")
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[0\]\.columns\.position\.shoulder': column 'TODO"):
+        load_case(tmp_path)
