@@ -13,9 +13,12 @@ from __future__ import annotations
 import argparse
 import pathlib
 import shutil
+import sys
 
 import jflex
-from jflex.gap import run_bench
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent / "gap"))
+from jflex_family.bench import run_bench  # noqa: E402
 
 
 def main(argv=None):

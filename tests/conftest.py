@@ -1,6 +1,11 @@
 import os
+import pathlib
+import sys
 
 import jax
+
+# the gap bench's generators live outside the library (benchmarks/gap): tests import them by path
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
 
 jax.config.update("jax_enable_x64", True)
 

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 import jflex
-from jflex.gap import _generate as G
+from jflex_family import generate as G
 from jflex.gap import _linear as L
 from jflex.gap import _torque as T
 from jflex.gap import diagnose, load_case
@@ -363,7 +363,7 @@ def test_frf_link_flexibility_found(tmp_path):
 
 @pytest.mark.slow
 def test_gap_bench_small(tmp_path):
-    from jflex.gap._bench import run_bench
+    from jflex_family.bench import run_bench
 
     s = run_bench(tmp_path, size="small", limit=None if SLOW else 3, progress=lambda m: None)
     assert s["cases"] >= 3

@@ -5,7 +5,7 @@ import collections
 import re
 import sys
 
-from jflex.gap import _bench
+from jflex_family import bench as _bench
 from jflex.gap._cli import BENCH_SIZES
 
 

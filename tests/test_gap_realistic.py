@@ -154,3 +154,18 @@ def test_out_of_library_effect_is_unexplained_and_a_user_effect_explains_it(tmp_
     assert [(s["effect"], s["joint"]) for s in r2["selected"]][:1] == [("cogging_torque", name)]
     got = r2["parameters"]["torque"][f"cogging_torque@{name}"]
     assert abs(got["a"] - A) < 0.05 * A and abs(got["b"]) < 0.05 * A
+
+
+def test_generators_and_bench_stay_outside_the_library():
+    # importing every module of the library loads none of the bench's generators (a fresh process:
+    # this test session has them on its path)
+    import subprocess
+    import sys
+
+    code = ("import importlib, pkgutil, sys, jflex\n"
+            "for m in pkgutil.walk_packages(jflex.__path__, 'jflex.'):\n"
+            "    importlib.import_module(m.name)\n"
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('jflex_family', 'independent', 'mujoco')]\n"
+            "print(bad); sys.exit(1 if bad else 0)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 import jflex
-from jflex.gap import _generate as G
+from jflex_family import generate as G
 from jflex.gap import _response as R
 from jflex.gap import _torque as T
 from jflex.gap import diagnose, load_case

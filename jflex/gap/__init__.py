@@ -23,4 +23,3 @@ from ._selection import (
 )
 from ._report import write_report as write_report
 from ._demo import demo as demo
-from ._bench import run_bench as run_bench

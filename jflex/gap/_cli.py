@@ -41,8 +41,26 @@ def _case_init(args) -> int:
     return 0
 
 
+def _bench_module():
+    """The jflex-family bench lives outside the package (``benchmarks/gap/jflex_family`` of a
+    source checkout): the library never imports its generator."""
+    import importlib
+    import pathlib
+    import sys
+
+    root = pathlib.Path(__file__).resolve().parents[2] / "benchmarks" / "gap"
+    if not (root / "jflex_family" / "bench.py").is_file():
+        from .._errors import ConfigError
+
+        raise ConfigError(f"jflex gap-bench runs the bench of a source checkout (benchmarks/gap/jflex_family); "
+                          f"not found under {root.parent.parent}: clone the repository and pip install -e it")
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    return importlib.import_module("jflex_family.bench")
+
+
 def _bench(args) -> int:
-    from ._bench import run_bench
+    run_bench = _bench_module().run_bench
 
     run_dir = make_run_dir("gap-bench", args.out)
     s = run_bench(run_dir, size=args.size, limit=args.limit, progress=lambda m: print(m, flush=True))
@@ -52,7 +70,7 @@ def _bench(args) -> int:
     return 0
 
 
-# what each --size runs (jflex.gap._bench.plan; tests/test_gap_bench_cli.py keeps the counts honest)
+# what each --size runs (benchmarks/gap/jflex_family/bench.py plan; tests/test_gap_bench_cli.py keeps the counts honest)
 BENCH_SIZES = (
     "Withheld-effect bench of the gap diagnosis: cases are generated with hidden effects, diagnosed "
     "without them, and scored. --size full (the default) runs 44 cases: 8 torque-side effects on 3 robots "

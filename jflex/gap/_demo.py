@@ -1,18 +1,20 @@
 """The built-in case of ``jflex demo``: a 3-joint arm whose data hide a payload and Coulomb
-friction at one joint; generated on the fly (no files needed), then diagnosed end to end."""
+friction at one joint. The case ships with the package (``jflex/data/demo_case``, made by
+``benchmarks/gap/make_demo_case.py``); it is copied into the run folder and diagnosed end to end."""
 
 from __future__ import annotations
 
 import pathlib
 
-from . import _generate as G
 from ._diagnose import diagnose
 from ._report import write_report
 
+DATA = pathlib.Path(__file__).resolve().parents[1] / "data"
+
 
 def demo(out_dir, *, progress=print) -> pathlib.Path:
-    """Build the built-in case under ``out_dir/case``, diagnose it, write the report into
-    ``out_dir``; the hidden truth is written to ``out_dir/truth.json`` only after the diagnosis.
+    """Copy the built-in case to ``out_dir/case``, diagnose it, write the report into ``out_dir``;
+    the hidden truth is written to ``out_dir/truth.json`` only after the diagnosis.
 
     **Returns:** the path of ``report.md``.
     """
@@ -21,14 +23,14 @@ def demo(out_dir, *, progress=print) -> pathlib.Path:
 
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    folder = G.torque_case(out / "case", "arm3", ["coulomb_friction", "payload"], seed=5, noise=0.01, nominal_friction=True)
-    hidden = out / "case.truth.json"
-    stash = out / ".truth.hidden"
-    shutil.move(str(hidden), stash)  # out of the way while the diagnosis runs
+    folder = out / "case"
+    if folder.exists():
+        shutil.rmtree(folder)
+    shutil.copytree(DATA / "demo_case", folder)
     diag = diagnose(folder, progress=progress)
     path = write_report(diag, out)
-    shutil.move(str(stash), out / "truth.json")
-    truth = json.loads((out / "truth.json").read_text())
+    truth = json.loads((DATA / "demo_truth.json").read_text())
+    (out / "truth.json").write_text(json.dumps(truth, indent=2))
     with path.open("a") as f:
         f.write("\n## The hidden truth of this demo case (revealed after the diagnosis)\n\n")
         for e in truth["effects"]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._generate import fourier_trajectory, rigid_torque
+from .generate import fourier_trajectory, rigid_torque
 
 # MuJoCo joint attribute -> the candidate name it stands for
 MUJOCO_EFFECTS = {"armature": "rotor_inertia", "damping": "viscous_friction", "frictionloss": "coulomb_friction",

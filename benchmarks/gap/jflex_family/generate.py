@@ -19,9 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
-from .._config import load_robot
-from .._dynamics import rnea
-from . import _linear as L
+from jflex._config import load_robot
+from jflex._dynamics import rnea
+from jflex.gap import _linear as L
 
 # --- robots (written as DH YAML so the case is self-contained) -------------------------------------
 ROBOTS = {
@@ -258,7 +258,7 @@ def rest_trajectory(n, rng, q0, T=1.5, fs=200.0, f0=0.6, harmonics=3, amp=0.3):
 
 def tool_positions(robot, q, frame="tool"):
     """Origin (N, 3) [m] of ``frame`` in base axes along the motion ``q`` (N, n)."""
-    from .._dynamics import frame_placement
+    from jflex._dynamics import frame_placement
 
     return np.asarray(jax.jit(jax.vmap(lambda a: frame_placement(robot, a, frame)[:3, 3]))(jnp.asarray(q)))
 
@@ -346,10 +346,10 @@ def flexible_tip_response(robot, K, C, Im, rng, tip_noise, q0=None, T=1.5, amp=0
     by gravity) and its tool position recorded with white noise ``tip_noise`` [m]."""
     import diffrax
 
-    from .. import simulate
-    from .._inputs import Sampled
-    from .._model import Model
-    from ..effects import FlexibleJoints
+    from jflex import simulate
+    from jflex._inputs import Sampled
+    from jflex._model import Model
+    from jflex.effects import FlexibleJoints
 
     n = robot.nq
     q0 = rng.uniform(-0.6, 0.6, n) if q0 is None else np.asarray(q0, float)
@@ -450,7 +450,7 @@ def frf_case(folder, robot_name, truths, seed, noise=0.01, n_post=3, tip_noise=N
     if tip_noise is not None:
         if set(truths) - {"joint_flexibility"}:
             raise ValueError(f"frf_case: a tip response is simulated for joint_flexibility truths only, got {truths}")
-        from .._dynamics import crba
+        from jflex._dynamics import crba
 
         Mjj = np.diag(np.asarray(crba(robot, jnp.zeros(n))))
         Im = Mjj * rng.uniform(0.15, 0.3, n)

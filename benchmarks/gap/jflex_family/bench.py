@@ -14,9 +14,10 @@ import time
 
 import numpy as np
 
-from .._runs import write_results
-from . import _generate as G
-from ._diagnose import diagnose
+from jflex._runs import write_results
+from jflex.gap import diagnose
+
+from . import generate as G
 
 TORQUE = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
           "payload", "backlash", "sensor_delay")
@@ -72,8 +73,9 @@ def make_case(spec: dict, root: pathlib.Path) -> pathlib.Path:
 
 
 def mujoco_case(folder: pathlib.Path, spec: dict):
-    from .._config import load_robot
-    from ._mujoco import simulate_mujoco
+    from jflex._config import load_robot
+
+    from .mujoco import simulate_mujoco
 
     rng = np.random.default_rng(spec["seed"])
     folder.mkdir(parents=True, exist_ok=True)
