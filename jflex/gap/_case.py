@@ -84,10 +84,21 @@ def _load_npz(path: pathlib.Path, field: str, case_file) -> dict:
     if not path.is_file():
         raise ConfigError(f"{case_file}: field '{field}': data file {path} not found")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
+        z = np.load(path, allow_pickle=False)
     except Exception as exc:  # a torn or non-NPZ file
-        raise DataError(f"{path}: not a readable NPZ file ({type(exc).__name__}: {exc})") from None
+        raise DataError(f"{case_file}: field '{field}': {path.name} is not a readable NPZ file "
+                        f"({type(exc).__name__}: {exc})") from None
+    if not hasattr(z, "files"):  # a bare .npy array
+        raise DataError(f"{case_file}: field '{field}': {path.name} is a single .npy array, not an NPZ archive of fields")
+    out = {}
+    with z:
+        for k in z.files:
+            try:
+                out[k] = z[k]
+            except Exception as exc:  # object arrays (pickles) are refused, or a torn member
+                raise DataError(f"{path}: field '{k}': not readable ({type(exc).__name__}: {exc}); "
+                                "fields are numeric or string arrays") from None
+    return out
 
 
 def _num(arr, path, field, *, ndim=None, complex_ok=False, allow_nan=False):
