@@ -14,17 +14,65 @@ from __future__ import annotations
 import itertools
 import pathlib
 import sys
+from typing import Annotated
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 import jflex
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "posture_modal.yaml"
+
+
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Count = Annotated[int, Field(ge=1)]
+
+
+class MapConfig(_Strict):
+    n_q2: Annotated[int, Field(ge=2)] = Field(description="grid points over q2")
+    n_q3: Annotated[int, Field(ge=2)] = Field(description="grid points over q3")
+    chunk_size: Count = Field(1024, description="postures per compiled batch")
+
+
+class FrfConfig(_Strict):
+    f_min_Hz: Annotated[float, Field(gt=0)]
+    f_max_Hz: Annotated[float, Field(gt=0)]
+    n: Annotated[int, Field(ge=2)]
+
+    @model_validator(mode="after")
+    def _band(self):
+        if self.f_max_Hz <= self.f_min_Hz:
+            raise ValueError(f"f_max_Hz ({self.f_max_Hz}) must exceed f_min_Hz ({self.f_min_Hz})")
+        return self
+
+
+class LobesConfig(_Strict):
+    robot: str = Field(description="name of one of the robots")
+    postures: Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=1)]
+    cutting_axes: Annotated[list[Annotated[list[float], Field(min_length=3, max_length=3)]],
+                            Field(min_length=3, max_length=3)] = Field(description="feed, normal, tool axis as rows")
+    spindle_rpm: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=2, max_length=2)]
+    n_lobes: Count
+
+
+class PostureModalConfig(_Strict):
+    robots: Annotated[list[str], Field(min_length=1)] = Field(description="seed-003 robot configs, relative to configs/")
+    milling: str = Field(description="milling parameters (Table 4.7), relative to configs/")
+    hold: str | list[str] = Field("actuated", description="coordinates held (jflex.modal_analysis)")
+    tool_frame: str = "tool"
+    tracking_steps: Count = 40
+    map: MapConfig
+    frf: FrfConfig
+    lobes: LobesConfig
 
 
 # the seed-003 robots (DH, base parameters, flexible joints, EMA postures) live in the library
@@ -241,7 +289,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
 
 
 def main(argv=None):
-    return jflex.experiment_cli("posture_modal", DEFAULT, run, argv, description=__doc__)
+    return jflex.experiment_cli("posture_modal", DEFAULT, run, argv, description=__doc__, schema=PostureModalConfig)
 
 
 if __name__ == "__main__":

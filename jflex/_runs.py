@@ -92,17 +92,24 @@ def experiment_cli(
     run: Callable[[dict, pathlib.Path], Mapping[str, Any]],
     argv: Sequence[str] | None = None,
     description: str | None = None,
+    schema: type | None = None,
 ) -> pathlib.Path:
     """Parse ``[CONFIG] [--out DIR]``, call ``run(config_dict, run_dir)`` and write its results.
 
     ``run`` returns the results mapping; it may also write plots into ``run_dir``.
-    Returns the run folder.
+    ``schema``: a pydantic model of the config (``extra="forbid"`` refuses unknown keys); the YAML
+    is validated against it before ``run`` (a :class:`ConfigError` naming file and field) and
+    ``run`` gets its dump, defaults filled in. Returns the run folder.
     """
     parser = argparse.ArgumentParser(prog=name, description=description)
     parser.add_argument("config", nargs="?", default=str(default_config), help="YAML config (default: %(default)s)")
     parser.add_argument("--out", default=None, help="run folder (default: a fresh runs/<name>-<time>)")
     args = parser.parse_args(argv)
     cfg = load_yaml(args.config)
+    if schema is not None:
+        from ._schema import validate
+
+        cfg = validate(schema, cfg, args.config).model_dump()
     run_dir = make_run_dir(name, args.out)
     results = dict(run(cfg, run_dir))
     results.setdefault("config", str(args.config))

@@ -224,3 +224,32 @@ def test_doc_table_is_the_schema():
     m = re.search(r"<!-- schema-table -->\n(.*?)\n<!-- /schema-table -->", text, re.S)
     assert m, "docs/case_format.md lacks the <!-- schema-table --> block"
     assert m.group(1).strip() == schema_table().strip(), "regenerate: python -m jflex.gap._schema"
+
+
+# --- experiment configs: the same hook ------------------------------------------------------------
+def test_experiment_config_schema(tmp_path):
+    sys.path.insert(0, str(DOC.parent.parent / "experiments"))
+    try:
+        import posture_modal
+    finally:
+        sys.path.pop(0)
+    shipped = DOC.parent.parent / "configs" / "posture_modal.yaml"
+    seen = []
+
+    def run(cfg, run_dir):
+        seen.append(cfg)
+        return {}
+
+    jflex.experiment_cli("pm", shipped, run, ["--out", str(tmp_path / "ok")], schema=posture_modal.PostureModalConfig)
+    assert seen[0]["tool_frame"] == "tool" and seen[0]["map"]["chunk_size"] == 1024 and seen[0]["frf"]["n"] == 600
+    for edit, field in [(lambda c: c["frf"].update(f_max_Hz=0.5), "frf"),
+                        (lambda c: c["map"].update(n_q2="41"), "map.n_q2"),
+                        (lambda c: c["lobes"].update(cutting_axes=[[0, 1, 0]]), "lobes.cutting_axes"),
+                        (lambda c: c.update(robot="x"), "robot")]:
+        bad = yaml.safe_load(shipped.read_text())
+        edit(bad)
+        path = tmp_path / "bad.yaml"
+        path.write_text(yaml.safe_dump(bad))
+        with pytest.raises(jflex.ConfigError, match=rf"bad\.yaml: field '{re.escape(field)}'"):
+            jflex.experiment_cli("pm", path, run, ["--out", str(tmp_path / "bad")], schema=posture_modal.PostureModalConfig)
+    assert len(seen) == 1  # run never saw a bad config
