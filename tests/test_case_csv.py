@@ -275,3 +275,36 @@ def test_case_init_leaves_todo_where_it_cannot_guess(tmp_path):
     assert cols["position"]["shoulder"].startswith("TODO") and cols["torque"]["elbow"].startswith("TODO")
     with pytest.raises(jflex.ConfigError, match=r"datasets\[0\]\.columns\.position\.shoulder': column 'TODO"):
         load_case(tmp_path)
+
+
+def test_response_and_modal_csv(tmp_path):
+    G.write_robot(tmp_path, "arm3")
+    t = np.arange(60) / 200.0
+    u = np.column_stack([np.sin(3 * t), np.cos(2 * t), t])
+    lines = ["t,u1,u2,u3,x_mm,q2_deg"] + [f"{a:.12g},{b:.12g},{c:.12g},{d:.12g},{e:.12g},{f:.12g}"
+                                          for a, b, c, d, e, f in zip(t, *u.T, 1e3 * np.sin(t), np.rad2deg(np.cos(t)))]
+    (tmp_path / "ring.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "modes.csv").write_text("mode,f_hz,zeta\n1,12.5,0.02\n2,31.0,\n")
+    ds = [{"kind": "modal", "file": "modes.csv", "split": "train", "columns": {"frequency": "f_hz", "damping_ratio": "zeta"},
+           "q0": {"joint1": 0.0, "joint2": 30.0, "joint3": -60.0, "wrist": 5.0}, "units": {"position": "deg"}},
+          {"kind": "response", "file": "ring.csv", "split": "validation", "scale": {"x_mm": 1e-3},
+           "columns": {"time": "t", "torque": {"joint3": "u3", "joint1": "u1", "joint2": "u2"},
+                       "output": {"tip_x": "x_mm", "joint2": "q2_deg"}},
+           "units": {"position": "deg"}, "q0": [0.0, 30.0, -60.0]}]
+    (tmp_path / "case.yaml").write_text(yaml.safe_dump({"robot": "robot.yaml", "tool_frame": "tool", "datasets": ds},
+                                                       sort_keys=False))
+    modal, resp = load_case(tmp_path).datasets
+    np.testing.assert_allclose(modal.arrays["freq"], [12.5, 31.0])
+    assert modal.arrays["zeta"][0] == 0.02 and np.isnan(modal.arrays["zeta"][1])  # empty cell: not identified
+    np.testing.assert_allclose(modal.arrays["q0"], np.deg2rad([0, 30, -60]))
+    assert modal.extra_joints == ("wrist",) and np.allclose(modal.arrays["q0_extra"], np.deg2rad(5.0))
+    a = resp.arrays
+    assert a["channels"] == ("tip_x", "joint2")
+    np.testing.assert_allclose(a["tau"], u, rtol=PREC)
+    np.testing.assert_allclose(a["y"][:, 0], np.sin(t), rtol=PREC)
+    np.testing.assert_allclose(a["y"][:, 1], np.cos(t), rtol=PREC)
+    np.testing.assert_allclose(a["q0"], np.deg2rad([0, 30, -60]))
+    ds[1].pop("q0")
+    (tmp_path / "case.yaml").write_text(yaml.safe_dump({"robot": "robot.yaml", "tool_frame": "tool", "datasets": ds}))
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[1\]\.q0': missing"):
+        load_case(tmp_path)
