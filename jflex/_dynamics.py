@@ -13,17 +13,12 @@ import jax.numpy as jnp
 
 from . import _scalar as s
 from . import _spatial as sp
-from ._robot import PRISMATIC, Robot, check_q
+from ._checks import checked_arrays as _checked, guard, has_inertia, moving_inertia
+from ._errors import ParameterError
+from ._robot import PRISMATIC, Robot
 from ._tree import accumulate, consts, host, motion, support, walk
 
 _REFERENCES = ("local", "world", "local_world_aligned")
-
-
-def _checked(robot, **arrays):
-    for name, a in arrays.items():
-        if a is not None:
-            check_q(robot, a, name)
-    return [None if a is None else jnp.asarray(a) for a in arrays.values()]
 
 
 def _dtype():
@@ -37,7 +32,7 @@ def forward_kinematics(robot: Robot, q):
 
     **Returns:** (n, 4, 4) homogeneous transforms of the body frames in the base frame.
     """
-    (q,) = _checked(robot, q=q)
+    (q,) = _checked("forward_kinematics", robot, q=q)
     ls = walk(robot, consts(robot, inertia=False), q, world=True)
     dt = _dtype()
     return jnp.stack([sp.homogeneous(R.array().astype(dt), p.array().astype(dt)) for R, p in zip(ls.oR, ls.op)])
@@ -56,7 +51,7 @@ def _frame_pose(robot: Robot, ls, frame):
 
 def frame_placement(robot: Robot, q, frame):
     """World placement (4, 4) of a named frame (link, joint or extra frame such as a tool)."""
-    (q,) = _checked(robot, q=q)
+    (q,) = _checked("frame_placement", robot, q=q)
     _, R, p = _frame_pose(robot, walk(robot, consts(robot, inertia=False), q, world=True), frame)
     dt = _dtype()
     return sp.homogeneous(R.array().astype(dt), p.array().astype(dt))
@@ -77,7 +72,7 @@ def jacobian(robot: Robot, q, frame, reference: str = "local_world_aligned"):
     """
     if reference not in _REFERENCES:
         raise ValueError(f"jacobian: reference must be one of {_REFERENCES}, got '{reference}'")
-    (q,) = _checked(robot, q=q)
+    (q,) = _checked("jacobian", robot, q=q)
     c = consts(robot, inertia=False)
     ls = walk(robot, c, q, world=True)
     body, oR_f, op_f = _frame_pose(robot, ls, frame)
@@ -125,11 +120,21 @@ def rnea(robot: Robot, q, qd, qdd, f_ext=None):
     body ``[force; moment]`` in body axes about the body origin [N, N m].
 
     **Returns:** (n,) joint torques/forces ``tau = M(q) qdd + C(q, qd) qd + g(q) - J^T f_ext``.
+
+    Raises :class:`jflex.DataError` for NaN/inf arguments (at run time inside ``jit``) and
+    :class:`jflex.ParameterError` for a robot without any inertial parameters.
     """
-    q, qd, qdd = _checked(robot, q=q, qd=qd, qdd=qdd)
+    has_inertia("rnea", robot)
+    return _rnea(robot, q, qd, qdd, f_ext, "rnea")
+
+
+def _rnea(robot: Robot, q, qd, qdd, f_ext, fn):
+    """:func:`rnea` without the inertia check (a :class:`jflex.Model`'s effects may carry all the
+    mass of a kinematic robot); ``fn`` names the caller in messages."""
+    q, qd, qdd, f_ext = _checked(fn, robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
     c = consts(robot)
     ls = walk(robot, c, q, qd, qdd)
-    ns, fs = accumulate(robot, ls, *_body_forces(robot, c, ls, None if f_ext is None else jnp.asarray(f_ext)))
+    ns, fs = accumulate(robot, ls, *_body_forces(robot, c, ls, f_ext))
     tau = []
     for i in range(robot.nq):
         sw, sv = motion(robot, c, i)
@@ -139,13 +144,15 @@ def rnea(robot: Robot, q, qd, qdd, f_ext=None):
 
 def nonlinear_effects(robot: Robot, q, qd):
     """Coriolis, centrifugal and gravity torques ``h(q, qd) = rnea(q, qd, 0)``, shape (n,)."""
-    return rnea(robot, q, qd, jnp.zeros_like(jnp.asarray(qd)))
+    has_inertia("nonlinear_effects", robot)
+    return _rnea(robot, q, qd, jnp.zeros_like(jnp.asarray(qd)), None, "nonlinear_effects")
 
 
 def gravity(robot: Robot, q):
     """Gravity torques ``g(q) = rnea(q, 0, 0)``, shape (n,)."""
+    has_inertia("gravity", robot)
     z = jnp.zeros_like(jnp.asarray(q))
-    return rnea(robot, q, z, z)
+    return _rnea(robot, q, z, z, None, "gravity")
 
 
 def _inertia_to_parent(robot, c, i, qi, ls, I):
@@ -161,8 +168,16 @@ def _inertia_to_parent(robot, c, i, qi, ls, I):
 
 
 def crba(robot: Robot, q):
-    """Joint-space mass matrix by the composite rigid-body algorithm, shape (n, n), symmetric."""
-    (q,) = _checked(robot, q=q)
+    """Joint-space mass matrix by the composite rigid-body algorithm, shape (n, n), symmetric.
+
+    Raises like :func:`rnea` for NaN/inf ``q`` and a robot without inertial parameters."""
+    has_inertia("crba", robot)
+    return _crba(robot, q, "crba")
+
+
+def _crba(robot: Robot, q, fn):
+    """:func:`crba` without the inertia check (see :func:`_rnea`)."""
+    (q,) = _checked(fn, robot, q=q)
     n = robot.nq
     c = consts(robot)
     ls = walk(robot, c, q)
@@ -246,8 +261,17 @@ def _barrier6(*blocks):
 
 
 def aba(robot: Robot, q, qd, tau, f_ext=None):
-    """Forward dynamics by the articulated-body algorithm: joint accelerations (n,)."""
-    q, qd, tau = _checked(robot, q=q, qd=qd, tau=tau)
+    """Forward dynamics by the articulated-body algorithm: joint accelerations (n,).
+
+    Raises :class:`jflex.DataError` for NaN/inf arguments and :class:`jflex.ParameterError` when a
+    joint moves no inertia (the mass matrix is singular), naming the joint; inside ``jit`` with the
+    robot traced both are run-time errors with the same messages."""
+    return _aba(robot, q, qd, tau, f_ext, "aba")
+
+
+def _aba(robot: Robot, q, qd, tau, f_ext, fn):
+    moving_inertia(fn, robot)
+    q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
     n = robot.nq
     c = consts(robot)
     ls = walk(robot, c, q, qd)
@@ -271,6 +295,11 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
         U[i] = _mv6(IA[i], S[i])
         D[i] = s.sum_(*(s.mul(a, b) for a, b in zip(S[i], U[i])))
         u[i] = s.sub(tau[i], s.sum_(*(s.mul(a, b) for a, b in zip(S[i], pA[i]))))
+        if isinstance(D[i], float) and not D[i] > 0:
+            raise ParameterError(
+                f"{fn}: joint '{robot.joint_names[i]}' moves no inertia (articulated inertia {D[i]} about its axis): "
+                "the mass matrix is singular; give the links it carries inertial parameters (robot.inertia)"
+            )
         par = robot.parents[i]
         if par >= 0:
             Dinv = 1.0 / D[i]
@@ -294,7 +323,13 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
         qdd[i] = s.mul(s.sub(u[i], s.sum_(*(s.mul(x, y) for x, y in zip(U[i], ap)))), 1.0 / D[i])
         a[i] = [s.add(x, s.mul(y, qdd[i])) for x, y in zip(ap, S[i])]
         a[i], (qdd[i],) = _barrier6(a[i], [qdd[i]])
-    return s.stack(qdd, _dtype())
+    out = s.stack(qdd, _dtype())
+    Dt = [d for d in D if not isinstance(d, float)]
+    if Dt:  # singular only for some postures or a traced robot: checked at run time
+        out = guard(out, [jnp.any(jnp.stack(Dt) <= 0)], [
+            f"{fn}: a joint moves no inertia (articulated inertia <= 0 about its axis): the mass matrix is singular; "
+            "check robot.inertia"])
+    return out
 
 
 def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
@@ -305,13 +340,18 @@ def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
     at 1e5) or ``"crba"`` (mass matrix and Cholesky solve).
     """
     if method == "aba":
-        return aba(robot, q, qd, tau, f_ext)
+        return _aba(robot, q, qd, tau, f_ext, "forward_dynamics")
     if method != "crba":
         raise ValueError(f"forward_dynamics: method must be 'aba' or 'crba', got '{method}'")
-    M = crba(robot, q)
-    h = rnea(robot, q, qd, jnp.zeros_like(jnp.asarray(qd)), f_ext)
+    fn = "forward_dynamics (method='crba')"
+    moving_inertia(fn, robot)
+    (tau,) = _checked(fn, robot, tau=tau)
+    M = _crba(robot, q, fn)
+    h = _rnea(robot, q, qd, jnp.zeros_like(jnp.asarray(qd)), f_ext, fn)
     L = jnp.linalg.cholesky(M)
-    return jax.scipy.linalg.cho_solve((L, True), jnp.asarray(tau) - h)
+    L = guard(L, [~jnp.all(jnp.isfinite(L))], [
+        f"{fn}: the mass matrix is not positive definite (a joint moves no inertia?); check robot.inertia"])
+    return jax.scipy.linalg.cho_solve((L, True), tau - h)
 
 
 _UNIT_PARAMS = [s.Inertia.of([1.0 if j == k else 0.0 for j in range(10)]) for k in range(10)]
@@ -323,7 +363,7 @@ def regressor(robot: Robot, q, qd, qdd):
     Parameters per link in Pinocchio's order ``[m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz,
     I_yz, I_zz]``, inertia about the body-frame origin.
     """
-    q, qd, qdd = _checked(robot, q=q, qd=qd, qdd=qdd)
+    q, qd, qdd = _checked("regressor", robot, q=q, qd=qd, qdd=qdd)
     n = robot.nq
     c = consts(robot, inertia=False)
     ls = walk(robot, c, q, qd, qdd)
@@ -350,7 +390,7 @@ def regressor(robot: Robot, q, qd, qdd):
 
 def kinetic_energy(robot: Robot, q, qd):
     """Kinetic energy [J]: sum over bodies of v^T I v / 2."""
-    q, qd = _checked(robot, q=q, qd=qd)
+    q, qd = _checked("kinetic_energy", robot, q=q, qd=qd)
     c = consts(robot)
     ls = walk(robot, c, q, qd)
     T = 0.0
@@ -362,7 +402,7 @@ def kinetic_energy(robot: Robot, q, qd):
 
 def potential_energy(robot: Robot, q):
     """Gravitational potential energy [J] relative to the base origin: -sum m g . c."""
-    (q,) = _checked(robot, q=q)
+    (q,) = _checked("potential_energy", robot, q=q)
     c = consts(robot)
     ls = walk(robot, c, q, world=True)
     V = 0.0

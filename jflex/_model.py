@@ -14,7 +14,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._dynamics import crba, gravity, rnea
+from ._dynamics import _crba, _rnea, gravity
 from ._errors import ShapeError
 from ._robot import Robot
 from .effects._base import AbstractEffect, Slots
@@ -127,7 +127,7 @@ def mass_matrix(model: Model, x):
     _check(model, x, "x")
     r, lay = model.rigid, model.layout
     n, nx = r.nq, lay.nx
-    M = jnp.zeros((nx, nx), dtype=x.dtype).at[:n, :n].set(crba(r, x[:n]))
+    M = jnp.zeros((nx, nx), dtype=x.dtype).at[:n, :n].set(_crba(r, x[:n], "mass_matrix"))
     T = lambda xd: _effect_energy(model, x, xd)[0]
     return M + jax.hessian(T)(jnp.zeros_like(x))
 
@@ -136,7 +136,7 @@ def bias_forces(model: Model, t, x, xd, z):
     """``h(x, xd) - sum f_e``: everything but ``M xdd`` and the input, shape (nx,)."""
     r, lay = model.rigid, model.layout
     n, nx = r.nq, lay.nx
-    h = _pad(rnea(r, x[:n], xd[:n], jnp.zeros_like(xd[:n])), n, nx)
+    h = _pad(_rnea(r, x[:n], xd[:n], jnp.zeros_like(xd[:n]), None, "bias_forces"), n, nx)
 
     # Lagrange's terms of the effects' energies: d/dt(dT/dxd) - dT/dx + dV/dx at xdd = 0.
     def dT_dxd(x_):
@@ -206,7 +206,8 @@ def _static_forces(model: Model, t, x, xd, z):
     with their first derivatives, so this is all a linearisation about rest needs."""
     r, lay = model.rigid, model.layout
     n, nx = r.nq, lay.nx
-    g = _pad(gravity(r, x[:n]), n, nx)
+    z = jnp.zeros_like(x[:n])
+    g = _pad(_rnea(r, x[:n], z, z, None, "linearize"), n, nx)
     dV = jax.grad(lambda x_: _effect_energy(model, x_, jnp.zeros_like(x_))[1])(x)
     f = jnp.zeros(nx, dtype=x.dtype)
     for e, s in zip(model.effects, lay.slots):
