@@ -152,3 +152,4 @@ def band_noise_psd(x, dt: float, f_lo: float, f_hi: float):
     if not m.any():
         return np.zeros(x.shape[1]), f, P
     return np.median(P[m], axis=0), f, P
+
