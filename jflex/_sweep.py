@@ -10,11 +10,13 @@ then lists every host's devices and the same ``sweep`` call shards each chunk ac
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import pathlib
 import sys
 import time
+import zipfile
 from collections.abc import Callable
 
 import equinox as eqx
@@ -24,7 +26,15 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._allocator import tune_allocator
-from ._errors import ShapeError
+from ._errors import DataError, ShapeError
+from ._fingerprint import fingerprint
+
+_MANIFEST = "sweep.json"
+_CHANGED = {
+    "function_hash": "the function or a value it reaches changed (its code, closure, defaults or globals: e.g. a robot)",
+    "inputs_hash": "the inputs changed",
+}
+_FP_KEY = "__fingerprint__"
 
 
 def _tune_allocator_once():
@@ -80,6 +90,7 @@ def sweep(
     out_dir: str | os.PathLike | None = None,
     devices=None,
     label: str = "sweep",
+    key=None,
 ):
     """Evaluate ``fn`` (one item, no batch dimension) over the leading axis of ``args``.
 
@@ -93,8 +104,15 @@ def sweep(
     - ``on_chunk``: ``on_chunk(start, stop, outputs)`` called with host (NumPy) outputs of each
       finished chunk.
     - ``out_dir``: if given, each finished chunk is saved as ``out_dir/chunk_<start>.npz`` at
-      once, and chunks already there are loaded instead of recomputed (resume).
+      once (atomically: a temporary file renamed into place), and chunks already there are loaded
+      instead of recomputed (resume). Each chunk and the folder's ``sweep.json`` carry a
+      fingerprint of the inputs, the function (qualified name, bytecode and the arrays and
+      pytrees it closes over, e.g. a robot), the chunk size and ``key``; a folder written by a
+      different sweep, or a damaged chunk, raises :class:`jflex.DataError` naming the file, and
+      nothing in it is reused (clear the folder or pass another ``out_dir``).
     - ``devices``: devices to shard each chunk over (default ``jax.devices()``).
+    - ``key``: anything whose ``repr`` tells this sweep apart when the fingerprint cannot see a
+      change (a model read from a file inside ``fn``, an object attribute it reads).
 
     **Returns:** the outputs for all N items as NumPy arrays (same pytree structure as ``fn``'s).
 
@@ -122,6 +140,8 @@ def sweep(
     out_path = pathlib.Path(out_dir) if out_dir is not None else None
     if out_path is not None:
         out_path.mkdir(parents=True, exist_ok=True)
+        identity = _identity(fn, args, N, chunk, key)
+        _check_manifest(out_path, identity)
     treedef = None
     pieces = []
     t0 = time.perf_counter()
@@ -129,8 +149,7 @@ def sweep(
         stop = min(start + chunk, N)
         cached = out_path / f"chunk_{start:09d}.npz" if out_path is not None else None
         if cached is not None and cached.exists():
-            with np.load(cached) as data:
-                flat = [data[f"leaf{k}"] for k in range(len(data.files))]
+            flat = _load_chunk(cached, _chunk_fingerprint(identity, start, stop), out_path)
             if treedef is None:
                 treedef = jax.tree_util.tree_structure(jax.eval_shape(jax.vmap(fn), *jax.tree_util.tree_map(lambda a: a[:1], args)))
             host = jax.tree_util.tree_unflatten(treedef, flat)
@@ -147,12 +166,97 @@ def sweep(
             host = jax.tree_util.tree_map(lambda a: np.asarray(a)[: stop - start], out)
             flat, treedef = jax.tree_util.tree_flatten(host)
             if cached is not None:
-                tmp = cached.with_name(cached.stem + ".tmp.npz")
-                np.savez(tmp, **{f"leaf{k}": v for k, v in enumerate(flat)})
-                os.replace(tmp, cached)
+                _save_chunk(cached, flat, _chunk_fingerprint(identity, start, stop))
         if on_chunk is not None:
             on_chunk(start, stop, host)
         pieces.append(host)
         if progress:
             _progress(stop, N, t0, label)
     return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=0), *pieces)
+
+
+# ---- resumable chunks: fingerprints, atomic writes, refusal of anything stale ----------------
+
+
+def _identity(fn, args, N, chunk, key) -> dict:
+    """What makes two sweeps the same: each part hashed separately so a mismatch can be named."""
+    return {
+        "format": 1,
+        "function": f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', type(fn).__name__)}",
+        "function_hash": fingerprint(fn),
+        "inputs_hash": fingerprint(args),
+        "items": N,
+        "chunk_size": chunk,
+        "key": repr(key),
+    }
+
+
+def _chunk_fingerprint(identity: dict, start: int, stop: int) -> str:
+    return fingerprint(json.dumps(identity, sort_keys=True), start, stop)
+
+
+def _clear_hint(out_path) -> str:
+    return f"clear the folder {out_path} (or pass another out_dir) to recompute; nothing in it was reused"
+
+
+def _atomic_write(path: pathlib.Path, write) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _check_manifest(out_path: pathlib.Path, identity: dict) -> None:
+    """Refuse a folder written by another sweep (or by a jflex without fingerprints); start a new
+    folder's manifest."""
+    manifest = out_path / _MANIFEST
+    chunks = sorted(out_path.glob("chunk_*.npz"))
+    if not manifest.exists():
+        if chunks:
+            raise DataError(
+                f"sweep: {chunks[0]} has no fingerprint ({out_path / _MANIFEST} is missing: written by an older jflex "
+                f"or another program), so it cannot be told apart from a stale result; {_clear_hint(out_path)}"
+            )
+        _atomic_write(manifest, lambda f: f.write(json.dumps(identity, indent=1).encode()))
+        return
+    try:
+        old = json.loads(manifest.read_text())
+    except (OSError, ValueError) as exc:
+        raise DataError(f"sweep: {manifest} is damaged ({exc}); {_clear_hint(out_path)}") from None
+    diff = [k for k in identity if old.get(k) != identity[k]]
+    if diff:
+        what = ", ".join(
+            f"{k} {old.get(k)} -> {identity[k]}" if not k.endswith("_hash") else _CHANGED[k] for k in diff
+        )
+        raise DataError(
+            f"sweep: {out_path} holds the chunks of a different sweep ({what}): resuming would mix stale results "
+            f"with new ones; {_clear_hint(out_path)}"
+        )
+
+
+def _save_chunk(path: pathlib.Path, flat, fp: str) -> None:
+    arrays = {f"leaf{k}": v for k, v in enumerate(flat)}
+    arrays[_FP_KEY] = np.array(fp)
+    _atomic_write(path, lambda f: np.savez(f, **arrays))
+
+
+def _load_chunk(path: pathlib.Path, fp: str, out_path) -> list:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            stored = str(data[_FP_KEY]) if _FP_KEY in data.files else None
+            leaves = sorted((f for f in data.files if f != _FP_KEY), key=lambda f: int(f[4:]))
+            flat = [data[f] for f in leaves]
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
+        raise DataError(f"sweep: {path} is damaged ({type(exc).__name__}: {exc}); {_clear_hint(out_path)}") from None
+    if stored != fp:
+        raise DataError(
+            f"sweep: {path} was written by a different sweep (its fingerprint does not match this call's inputs, "
+            f"function, chunk size and key); {_clear_hint(out_path)}"
+        )
+    return flat

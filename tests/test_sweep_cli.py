@@ -46,12 +46,19 @@ def test_sweep_resumes_from_saved_chunks(tmp_path):
 
     q = np.arange(10.0)[:, None]
     first = jflex.sweep(fn, q, chunk_size=4, out_dir=tmp_path, progress=False)
-    # corrupt nothing, but make the function different: resumed chunks must come from disk
-    second = jflex.sweep(lambda x: x * 3.0, q, chunk_size=4, out_dir=tmp_path, progress=False,
+    # plant other values in chunk 4 (its fingerprint kept): the resumed sweep must read them from disk
+    with np.load(tmp_path / "chunk_000000004.npz") as d:
+        saved = dict(d)
+    saved["leaf0"] = saved["leaf0"] + 100.0
+    np.savez(tmp_path / "chunk_000000004.npz", **saved)
+    second = jflex.sweep(fn, q, chunk_size=4, out_dir=tmp_path, progress=False,
                          on_chunk=lambda a, b, o: calls.append(a))
     np.testing.assert_allclose(first, 2.0 * q)
-    np.testing.assert_allclose(second, 2.0 * q)
+    np.testing.assert_allclose(second[4:8], 2.0 * q[4:8] + 100.0)
     assert calls == [0, 4, 8]
+    # another function in the same folder is refused, never served stale chunks (tests/test_sweep_resume.py)
+    with pytest.raises(jflex.DataError, match="different sweep"):
+        jflex.sweep(lambda x: x * 3.0, q, chunk_size=4, out_dir=tmp_path, progress=False)
 
 
 def test_sweep_rejects_mismatched_batch():
