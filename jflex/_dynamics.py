@@ -134,7 +134,7 @@ def _rnea(robot: Robot, q, qd, qdd, f_ext, fn):
     q, qd, qdd, f_ext = _checked(fn, robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
     c = consts(robot)
     ls = walk(robot, c, q, qd, qdd)
-    ns, fs = accumulate(robot, ls, *_body_forces(robot, c, ls, f_ext))
+    ns, fs = accumulate(robot, ls, *_body_forces(robot, c, ls, f_ext), fence=c.fence)
     tau = []
     for i in range(robot.nq):
         sw, sv = motion(robot, c, i)
@@ -162,7 +162,7 @@ def _inertia_to_parent(robot, c, i, qi, ls, I):
     ax = c.axis[i]
     # the test is on trace-time floats: a traced axis (gradients in the robot) takes the general path
     if robot.joint_types[i] != PRISMATIC and s._is(ax.x, 0.0) and s._is(ax.y, 0.0) and (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
-        cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi))
+        cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi), fence=c.fence)
         return I.rotated_z(cs, sn).to_parent(c.Rpl[i], c.ppl[i])
     return I.to_parent(ls.R[i], ls.p[i])
 
@@ -186,7 +186,7 @@ def _crba(robot: Robot, q, fn):
     for i in reversed(range(n)):
         par = robot.parents[i]
         if par >= 0:
-            (Ic[par],) = s.barrier(Ic[par] + _inertia_to_parent(robot, c, i, q[i], ls, Ic[i]))
+            (Ic[par],) = s.barrier(Ic[par] + _inertia_to_parent(robot, c, i, q[i], ls, Ic[i]), fence=c.fence)
     M = [[0.0] * n for _ in range(n)]
     for i in range(n):
         sw, sv = motion(robot, c, i)
@@ -194,7 +194,7 @@ def _crba(robot: Robot, q, fn):
         M[i][i] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))
         j = i
         while robot.parents[j] >= 0:
-            Fn, Ff = s.barrier(*s.force_to_parent(ls.R[j], ls.p[j], Fn, Ff))
+            Fn, Ff = s.barrier(*s.force_to_parent(ls.R[j], ls.p[j], Fn, Ff), fence=c.fence)
             j = robot.parents[j]
             sw, sv = motion(robot, c, j)
             M[i][j] = M[j][i] = s.add(s.dot(sw, Fn), s.dot(sv, Ff))
@@ -241,7 +241,7 @@ def _I6(I: s.Inertia):
     return rows
 
 
-def _barrier6(*blocks):
+def _barrier6(fence, *blocks):
     """:func:`_scalar.barrier` for nested lists of scalars (6-vectors, 6x6 matrices)."""
     flat = []
 
@@ -252,7 +252,7 @@ def _barrier6(*blocks):
         return len(flat) - 1
 
     tags = [put(b) for b in blocks]
-    vals = s.barrier(*flat)
+    vals = s.barrier(*flat, fence=fence)
 
     def get(t):
         return [get(y) for y in t] if isinstance(t, list) else vals[t]
@@ -307,13 +307,13 @@ def _aba(robot: Robot, q, qd, tau, f_ext, fn):
             uD = s.mul(u[i], Dinv)
             Iac = _mv6(Ia, cc[i])
             pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
-            Ia, pa = _barrier6(Ia, pa)
+            Ia, pa = _barrier6(c.fence, Ia, pa)
             XtIa = [list(col) for col in zip(*_mm6([list(r) for r in zip(*X[i])], Ia))]  # (X^T Ia)^T
             XtIaX = _mm6([list(r) for r in zip(*XtIa)], X[i])
             IA[par] = [[s.add(IA[par][r][k], XtIaX[r][k]) for k in range(6)] for r in range(6)]
             Xtpa = _mtv6(X[i], pa)
             pA[par] = [s.add(a, b) for a, b in zip(pA[par], Xtpa)]
-            IA[par], pA[par] = _barrier6(IA[par], pA[par])
+            IA[par], pA[par] = _barrier6(c.fence, IA[par], pA[par])
     a0 = [0.0, 0.0, 0.0] + list(-c.gravity)
     a = [None] * n
     qdd = [None] * n
@@ -322,7 +322,7 @@ def _aba(robot: Robot, q, qd, tau, f_ext, fn):
         ap = [s.add(x, y) for x, y in zip(_mv6(X[i], a0 if par < 0 else a[par]), cc[i])]
         qdd[i] = s.mul(s.sub(u[i], s.sum_(*(s.mul(x, y) for x, y in zip(U[i], ap)))), 1.0 / D[i])
         a[i] = [s.add(x, s.mul(y, qdd[i])) for x, y in zip(ap, S[i])]
-        a[i], (qdd[i],) = _barrier6(a[i], [qdd[i]])
+        a[i], (qdd[i],) = _barrier6(c.fence, a[i], [qdd[i]])
     out = s.stack(qdd, _dtype())
     Dt = [d for d in D if not isinstance(d, float)]
     if Dt:  # singular only for some postures or a traced robot: checked at run time

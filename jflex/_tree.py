@@ -47,6 +47,7 @@ class RobotConsts(NamedTuple):
     axis: list
     inertia: list
     gravity: s.V3
+    fence: object = None  # run-time boolean for _scalar.barrier when the robot is traced, else None
 
 
 def _snap(a):
@@ -61,6 +62,20 @@ def _snap(a):
     return a
 
 
+def _fence(robot: Robot):
+    """With robot leaves traced (``jax.jit(jflex.rnea)(robot, ...)``) nothing folds and XLA:CPU's
+    fusion would recompute each body's cone in every consumer (35-42 s to compile the Panda's
+    ABA): the barriers become conditionals on this run-time predicate (a NaN robot, so never
+    taken for a valid one; unbatched under vmap). None for a robot known at trace time."""
+    leaves = [a for a in (robot.placement_R, robot.placement_p, robot.axis, robot.inertia, robot.gravity)
+              if isinstance(a, jax.core.Tracer)]
+    if not leaves:
+        return None
+    from equinox.internal import unvmap_any
+
+    return unvmap_any(jnp.isnan(jnp.sum(leaves[0])))
+
+
 def consts(robot: Robot, inertia=True) -> RobotConsts:
     R, p, ax = _snap(host(robot.placement_R)), host(robot.placement_p), _snap(host(robot.axis))
     n = robot.nq
@@ -71,6 +86,7 @@ def consts(robot: Robot, inertia=True) -> RobotConsts:
         [s.V3.of(ax[i]) for i in range(n)],
         [s.Inertia.of(I[i]) for i in range(n)] if inertia else None,
         s.V3.of(host(robot.gravity)),
+        _fence(robot),
     )
 
 
@@ -110,31 +126,32 @@ def walk(robot: Robot, c: RobotConsts, q, qd=None, qdd=None, base_acc: s.V3 | No
             else:
                 oR[i], op[i] = oR[par].mm(R[i]), op[par] + oR[par].mv(p[i])
         if not want_v:
-            R[i], p[i] = s.barrier(R[i], p[i])
+            R[i], p[i] = s.barrier(R[i], p[i], fence=c.fence)
             continue
         sw, sv = motion(robot, c, i)
         pw, pv = (s.ZERO, s.ZERO) if par < 0 else (w[par], v[par])
         cw, cv = s.motion_to_child(R[i], p[i], pw, pv)
         w[i], v[i] = cw + sw.scale(qd[i]), cv + sv.scale(qd[i])
         if not want_a:
-            R[i], p[i], w[i], v[i] = s.barrier(R[i], p[i], w[i], v[i])
+            R[i], p[i], w[i], v[i] = s.barrier(R[i], p[i], w[i], v[i], fence=c.fence)
             continue
         paw, pav = (s.ZERO, a0) if par < 0 else (aw[par], av[par])
         caw, cav = s.motion_to_child(R[i], p[i], paw, pav)
         bw, bv = s.cross_motion(w[i], v[i], sw.scale(qd[i]), sv.scale(qd[i]))
         aw[i], av[i] = caw + sw.scale(qdd[i]) + bw, cav + sv.scale(qdd[i]) + bv
-        R[i], p[i], w[i], v[i], aw[i], av[i] = s.barrier(R[i], p[i], w[i], v[i], aw[i], av[i])
+        R[i], p[i], w[i], v[i], aw[i], av[i] = s.barrier(R[i], p[i], w[i], v[i], aw[i], av[i], fence=c.fence)
     return LinkStates(R, p, oR, op, w, v, aw, av)
 
 
-def accumulate(robot: Robot, ls: LinkStates, n_list: list, f_list: list):
-    """Backward pass: add each body's force (n_i, f_i) into its parent; returns composite forces."""
+def accumulate(robot: Robot, ls: LinkStates, n_list: list, f_list: list, fence=None):
+    """Backward pass: add each body's force (n_i, f_i) into its parent; returns composite forces
+    (``fence``: :attr:`RobotConsts.fence`)."""
     n_acc, f_acc = list(n_list), list(f_list)
     for i in reversed(range(robot.nq)):
         par = robot.parents[i]
         if par >= 0:
             dn, df = s.force_to_parent(ls.R[i], ls.p[i], n_acc[i], f_acc[i])
-            n_acc[par], f_acc[par] = s.barrier(n_acc[par] + dn, f_acc[par] + df)
+            n_acc[par], f_acc[par] = s.barrier(n_acc[par] + dn, f_acc[par] + df, fence=fence)
     return n_acc, f_acc
 
 
