@@ -7,3 +7,4 @@ from ._fractional import Fractional as Fractional, grunwald_letnikov as grunwald
 from ._hysteresis import Hysteretic as Hysteretic, masing_force as masing_force, virgin_curve as virgin_curve
 from ._friction import JointFriction as JointFriction
 from ._flexible_link import FlexibleLink as FlexibleLink
+from ._rigid_additions import Payload as Payload, RotorInertia as RotorInertia

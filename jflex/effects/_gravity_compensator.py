@@ -28,31 +28,39 @@ def _joint_index(robot, joint) -> int:
 
 
 class FourierGravityCompensator(AbstractEffect):
-    """Compensator torque as a cosine series (seed 003 Eq. 2.11): ``tau_GC = sum_k B_k cos(k q_j)``
-    applied to joint ``joint`` as an external torque.
+    """Compensator torque as a Fourier series of the joint angle (seed 003 Eq. 2.11: the cosines),
+    ``tau_GC = sum_k B_k cos(k q_j) + A_k sin(k q_j)``, applied to joint ``joint`` as an external
+    torque.
 
-    **Fields:** ``coefficients`` (m,) B_1..B_m [N m]; ``joint`` (static) index or name.
+    **Fields:** ``coefficients`` (m,) B_1..B_m [N m]; ``sine`` (m,) A_1..A_m [N m] (default zeros:
+    the thesis' cosine series, a balancer whose zero lies at q_j = 0); ``joint`` (static) index or name.
 
-    Its potential is ``V = -sum_k B_k sin(k q_j) / k``; its stiffness ``sum_k k B_k sin(k q_j)``.
+    Its potential is ``V = -sum_k (B_k sin(k q_j) - A_k cos(k q_j)) / k``.
     """
 
     coefficients: jnp.ndarray
+    sine: jnp.ndarray
     joint: int | str = eqx.field(static=True)
 
-    def __init__(self, coefficients, joint=1):
+    def __init__(self, coefficients, joint=1, sine=None):
         c = jnp.asarray(coefficients, dtype=float)
         if c.ndim != 1 or c.shape[0] == 0:
             raise ShapeError(f"FourierGravityCompensator.coefficients: expected (m,) with m >= 1 [N m], got {c.shape}")
-        cv = _concrete(c)
-        if cv is not None and not np.all(np.isfinite(cv)):
-            raise ParameterError("FourierGravityCompensator.coefficients: contains NaN or inf")
+        s = jnp.zeros_like(c) if sine is None else jnp.asarray(sine, dtype=float)
+        if s.shape != c.shape:
+            raise ShapeError(f"FourierGravityCompensator.sine: expected {c.shape} (as coefficients) [N m], got {s.shape}")
+        for name, v in (("coefficients", c), ("sine", s)):
+            cv = _concrete(v)
+            if cv is not None and not np.all(np.isfinite(cv)):
+                raise ParameterError(f"FourierGravityCompensator.{name}: contains NaN or inf")
         self.coefficients = c
+        self.sine = s
         self.joint = joint
 
     def potential_energy(self, robot, slots: Slots, x):
         q = x[_joint_index(robot, self.joint)]
         k = jnp.arange(1, self.coefficients.shape[0] + 1, dtype=x.dtype)
-        return -jnp.sum(self.coefficients * jnp.sin(k * q) / k)
+        return -jnp.sum((self.coefficients * jnp.sin(k * q) - self.sine * jnp.cos(k * q)) / k)
 
 
 class SpringGravityCompensator(AbstractEffect):

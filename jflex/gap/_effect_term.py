@@ -23,7 +23,7 @@ import numpy as np
 
 from .._dynamics import rnea
 from .._errors import ParameterError
-from .._model import Model, initial_state, model_inverse_dynamics
+from .._model import Model, _effect_energy, initial_state
 from ..identify._fit import Free, ParameterSpec
 
 LINEARITY_RTOL = 1e-6  # columns at the start and at twice the start must agree this well
@@ -106,12 +106,29 @@ class BoundCandidate:
         return A0
 
 
+def effect_forces(model: Model, t, x, xd, xdd, z):
+    """The effects' share of the generalised forces a motion needs: ``model_inverse_dynamics``
+    less the robot's own RNEA, without the rigid mass matrix (only what the effects change: the
+    robot they modify, the Lagrange terms of their energies, minus their forces)."""
+    r = model.rigid
+    tau = jnp.zeros_like(xd)
+    if r is not model.robot:
+        tau = rnea(r, x, xd, xdd) - rnea(model.robot, x, xd, xdd)
+    dT = lambda x_, v: jax.grad(lambda v_: _effect_energy(model, x_, v_)[0])(v)
+    _, a = jax.jvp(lambda v: dT(x, v), (xd,), (xdd,))
+    _, b = jax.jvp(lambda x_: dT(x_, xd), (x,), (xd,))
+    dL = jax.grad(lambda x_: _effect_energy(model, x_, xd)[1] - _effect_energy(model, x_, xd)[0])(x)
+    tau = tau + a + b + dL
+    for e, s in zip(model.effects, model.layout.slots):
+        tau = tau - e.generalized_force(r, s, t, x, xd, z)
+    return tau
+
+
 @eqx.filter_jit
 def _columns(model, spec, p, q, qd, qdd):
     def tau(pp, a, b, c):
         m = spec.apply(model, pp, physical=True)
-        full = model_inverse_dynamics(m, 0.0, a, b, c, initial_state(m))
-        return full - rnea(model.robot, a, b, c)
+        return effect_forces(m, 0.0, a, b, c, initial_state(m))
 
     return jax.vmap(lambda a, b, c: jax.jacfwd(tau)(p, a, b, c))(q, qd, qdd)
 
@@ -146,3 +163,78 @@ class EffectTerm:
 
     def label(self, joint_names) -> str:
         return self.effect if self.joint is None else f"{self.effect}@{joint_names[self.joint]}"
+
+
+# --- the built-in torque-side laws, read off jflex.effects ------------------------------------------
+COULOMB_LIMIT = 1e-6  # [rad/s] a Stribeck velocity this small leaves the Coulomb level alone
+
+
+# the free leaves' accessors are module-level functions, one object each: they are part of the key of
+# the compiled program, which is then shared by every robot of the same structure
+def _leaf(attr, i=0):
+    return _LEAVES.setdefault((attr, i), lambda m: getattr(m.effects[i], attr))
+
+
+_LEAVES: dict = {}
+
+
+def family(robot, name: str, hyper=None, smoothing: float = 5e-3):
+    """The built-in candidate family ``name`` as one effect (or one per joint) on every joint of
+    ``robot`` and its free parameters: the columns of all joints come from one evaluation, and the
+    candidate at joint j takes its own. ``hyper``: the Stribeck velocity [rad/s].
+    **Returns** ``(model, spec, per_joint)`` with ``per_joint(j) -> column indices``."""
+    from .. import effects as E
+
+    names = tuple(robot.joint_names)
+    n = len(names)
+    if name == "viscous_friction":
+        effs = [E.JointFriction(names, viscous=1.0, smoothing=smoothing)]
+        free = (Free("viscous", _leaf("viscous")),)
+        per = lambda j: [j]
+    elif name == "coulomb_friction":
+        effs = [E.JointFriction(names, coulomb=1.0, stribeck_velocity=COULOMB_LIMIT, smoothing=smoothing)]
+        free = (Free("coulomb", _leaf("coulomb")),)
+        per = lambda j: [j]
+    elif name == "stribeck_friction":
+        effs = [E.JointFriction(names, coulomb=1.0, stribeck=1.0, stribeck_velocity=float(hyper), smoothing=smoothing)]
+        free = (Free("coulomb", _leaf("coulomb")), Free("stribeck", _leaf("stribeck")))
+        per = lambda j: [j, n + j]
+    elif name == "rotor_inertia":
+        effs = [E.RotorInertia(names, 1.0)]
+        free = (Free("inertia", _leaf("inertia")),)
+        per = lambda j: [j]
+    elif name == "gravity_compensator":
+        effs = [E.FourierGravityCompensator([1.0, 1.0], joint=j, sine=[1.0, 1.0]) for j in range(n)]
+        free = tuple(f for j in range(n) for f in (Free(f"B{j}", _leaf("coefficients", j)), Free(f"A{j}", _leaf("sine", j))))
+        # [cos q, sin q, cos 2q, sin 2q] of joint j: B_1, A_1, B_2, A_2
+        per = lambda j: [4 * j, 4 * j + 2, 4 * j + 1, 4 * j + 3]
+    elif name == "payload":
+        effs = [E.Payload(np.ones(10))]
+        free = (Free("payload", _leaf("parameters")),)
+        per = lambda j: list(range(10))
+    else:
+        raise KeyError(name)
+    model = Model(robot, effs)
+    return model, ParameterSpec(free).bind(model), per
+
+
+_FAMILIES: dict = {}  # (id(robot), name) -> (robot, model, spec, per): one compiled program per family
+
+
+def family_columns(robot, name, hyper, q, qd, qdd) -> tuple:
+    """(N, n, size) columns of a family (:func:`family`) along a motion, and its ``per_joint``.
+    The family's model and free-parameter spec are built once per robot (their functions are part
+    of the compiled program's key); a Stribeck velocity is a leaf set into it."""
+    key = (id(robot), name)
+    hit = _FAMILIES.get(key)
+    if hit is None or hit[0] is not robot:
+        if len(_FAMILIES) > 64:
+            _FAMILIES.clear()
+        hit = _FAMILIES[key] = (robot, *family(robot, name, 0.1 if name == "stribeck_friction" else None))
+    _, model, spec, per = hit
+    if name == "stribeck_friction":
+        model = eqx.tree_at(lambda m: m.effects[0].stribeck_velocity, model,
+                            jnp.full(robot.nq, float(hyper)))
+    p = spec.physical(spec.pack(model))
+    return np.asarray(_columns(model, spec, p, q, qd, qdd)), per
+

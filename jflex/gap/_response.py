@@ -3,7 +3,8 @@ model joint (tip coordinates, a few joint angles) are compared with the model si
 the recorded applied torques from rest at the recorded posture ``q0``.
 
 The simulated model is the rigid robot plus the torque-side terms fitted on the torque training
-sets (:mod:`._torque`), written as one effect of fixed structure (:class:`FittedTorques`), plus
+sets (:mod:`._torque`), as the laws of :mod:`jflex.effects` with the fitted coefficients (zero
+where a term is absent, so that every model has the same structure), plus
 the joint springs fitted on FRF/modal data (:class:`jflex.effects.FlexibleJoints`, reduced
 model): the applied torque drives the motor side of a flexible joint, which carries the joint's
 rotor inertia; the spring carries it to the link. Every candidate and every step of the forward
@@ -24,8 +25,7 @@ import numpy as np
 from .._model import Model
 from .._simulate import simulate
 from .._model import model_inverse_dynamics, initial_state
-from ..effects._base import AbstractEffect, Slots
-from ..effects import FlexibleJoints
+from ..effects import FlexibleJoints, FourierGravityCompensator, JointFriction, Payload, RotorInertia
 from .._inputs import Sampled
 from . import _torque as T
 
@@ -34,37 +34,6 @@ NOT_SIMULATED = ("sensor_delay", "backlash")  # act on the measurement, not on t
 RTOL, ATOL = 1e-7, 1e-9  # the records' noise is ~1e-4 of their spread: the solver error stays far below
 MAX_STEPS = 200_000
 FAILED_ERROR = 10.0  # normalised error (1000 %) of samples a failed or diverged solve left non-finite
-
-
-class FittedTorques(AbstractEffect):
-    """The torque-side terms of a :class:`._torque.TorqueFit` as one effect on the robot joints:
-
-    $$ f = -\\big[F_v \\dot q + (F_c + F_{s} e^{-(\\dot q/v_s)^2}) \\tanh(\\dot q/\\epsilon)
-           - B_{\\cdot}\\,[\\cos q, \\sin q, \\cos 2q, \\sin 2q]\\big], \\qquad T = \\tfrac12 \\sum I_a \\dot q^2, $$
-
-    each term minus the candidate's torque column (the same ``epsilon`` as the columns). Zero
-    coefficients where a term is absent, so that every model has the same structure."""
-
-    viscous: jnp.ndarray
-    coulomb: jnp.ndarray
-    stribeck: jnp.ndarray  # F_s - F_c
-    velocity: jnp.ndarray  # v_s [rad/s]
-    rotor: jnp.ndarray  # I_a [kg m^2]
-    compensator: jnp.ndarray  # (n, 4)
-    smoothing: jnp.ndarray
-
-    def kinetic_energy(self, robot, slots: Slots, x, xd):
-        # the rotor term's column is I_a qdd: a diagonal mass, hence kinetic energy
-        return 0.5 * jnp.sum(self.rotor * xd[: slots.n] ** 2)
-
-    def generalized_force(self, robot, slots: Slots, t, x, xd, z):
-        n = slots.n
-        q, qd = x[:n], xd[:n]
-        sg = jnp.tanh(qd / self.smoothing)
-        tau = self.viscous * qd + (self.coulomb + self.stribeck * jnp.exp(-((qd / self.velocity) ** 2))) * sg
-        phi = jnp.stack([jnp.cos(q), jnp.sin(q), jnp.cos(2 * q), jnp.sin(2 * q)], axis=1)
-        tau = tau - jnp.sum(self.compensator * phi, axis=1)
-        return jnp.zeros(slots.nx, dtype=x.dtype).at[:n].set(-tau)
 
 
 def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
@@ -108,10 +77,15 @@ def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     inert = np.asarray(robot.inertia, float).copy()
     if tfit is not None and tfit.delta is not None:
         inert += tfit.delta.reshape(inert.shape)  # the nominal identification's inertial parameters
-    inert[n - 1] += pay
-    eff = FittedTorques(*(jnp.asarray(p[k]) for k in ("viscous", "coulomb", "stribeck")), jnp.asarray(vel),
-                        jnp.asarray(p["rotor"]), jnp.asarray(comp), jnp.asarray(T.EPS_SIGN))
-    effects = [eff]
+    names = tuple(robot.joint_names)
+    for key in p:  # the bounded fit keeps them >= 0; a last-digit negative would be refused by the laws
+        p[key] = np.maximum(p[key], 0.0)
+    # the laws of jflex.effects with the fitted coefficients, zero where a term is absent (one
+    # structure for every model: one compiled solve); the payload is the last link's parameters
+    effects = [JointFriction(names, viscous=p["viscous"], coulomb=p["coulomb"], stribeck=p["coulomb"] + p["stribeck"],
+                             stribeck_velocity=vel, smoothing=T.EPS_SIGN),
+               RotorInertia(names, p["rotor"]), Payload(pay)]
+    effects += [FourierGravityCompensator(comp[j, [0, 2]], joint=j, sine=comp[j, [1, 3]]) for j in range(n)]
     if flex:
         kk = np.array([springs[j][0] for j in flex], float)
         cc = np.array([springs[j][1] for j in flex], float)

@@ -21,12 +21,17 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.optimize as so
 
-from .._dynamics import regressor, rnea
+from .._dynamics import rnea
 from .._errors import DataError
+from ._effect_term import family_columns
 from ..identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
                                 motion_band, zero_phase_lowpass)
 
 EPS_SIGN = 0.005  # [rad/s] width of the smooth sign used by every Coulomb-like term (dry friction is sharp)
+# torque-side laws whose columns come from jflex.effects (the others act between the measurement and
+# the rigid model: a sensor's delay, play between motor encoder and link, a link lagging its motor)
+LAW_FAMILIES = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
+                "payload")
 STRIBECK_VS = (0.03, 0.06, 0.12, 0.25, 0.5)  # [rad/s] grid of Stribeck velocities
 DELAYS = tuple(np.round(np.arange(0.001, 0.0605, 0.001), 4))  # [s] grid of sensor delays
 
@@ -140,7 +145,6 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     propagated through the processing and the model (``NOISE_DRAWS`` redraws)."""
     a = ds.arrays
     t, tau_raw = np.asarray(a["t"], float), np.asarray(a["tau"], float)
-    n = robot.nq
     if derivatives_given(ds):
         q, qd, qdd = a["q"], a["qd"], a["qdd"]
         F, Y = (np.asarray(v) for v in _rigid_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
@@ -321,24 +325,18 @@ class Term:
         j = self.joint
         out = np.zeros((N, n, self.n_params))
         e = self.effect
-        if e == "viscous_friction":
-            out[:, j, 0] = s.qd[:, j]
-        elif e == "coulomb_friction":
-            out[:, j, 0] = np.tanh(s.qd[:, j] / EPS_SIGN)
-        elif e == "stribeck_friction":
-            sg = np.tanh(s.qd[:, j] / EPS_SIGN)
-            out[:, j, 0] = sg
-            out[:, j, 1] = np.exp(-((s.qd[:, j] / self.hyper) ** 2)) * sg
+        if e in LAW_FAMILIES:
+            # the law of jflex.effects itself: its inverse-dynamics Jacobian in the coefficients
+            key = ("family", e, self.hyper)
+            if key not in s.cache:
+                args = [jnp.asarray(a) for a in (s.q, s.qd, s.qdd)]
+                s.cache[key] = family_columns(s.robot, e, self.hyper, *args)
+            cols, per = s.cache[key]
+            out[:] = cols[:, :, per(0 if j is None else j)]
+            if e == "stribeck_friction":
+                out[:, :, 0] += out[:, :, 1]  # [Fc, Fs] -> [Fc, Fs - Fc]
         elif e == "joint_flexibility":
             out[:, :, 0] = compliance_column(s, j)
-        elif e == "rotor_inertia":
-            out[:, j, 0] = s.qdd[:, j]
-        elif e == "gravity_compensator":
-            qj = s.q[:, j]
-            # the compensator's torque opposes the columns' sign convention: tau_motor = ... - tau_GC
-            out[:, j, :] = -np.stack([np.cos(qj), np.sin(qj), np.cos(2 * qj), np.sin(2 * qj)], axis=1)
-        elif e == "payload":
-            out[:] = s.Ypay
         elif e == "backlash":
             # motor-side encoder; the link follows through the play (hyper = (half-width, engagement))
             out[:, :, :] = backlash_torque(s, j, self.hyper)
