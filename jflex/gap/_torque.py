@@ -476,7 +476,7 @@ def fit_with(base_terms, base_delay, new: Term | None, sets, inertia=None) -> To
     if new.effect == "sensor_delay":
         fits = [fit_terms(base_terms, d, sets, inertia) for d in DELAYS]
         best = min(fits, key=lambda f: f.cost)
-        return TorqueFit(best.terms + (Term("sensor_delay", None, best.delay),), best.delay, best.theta, best.cost)
+        return dataclasses.replace(best, terms=best.terms + (Term("sensor_delay", None, best.delay),))
     if new.effect == "backlash":
         # play half-width on a grid (engagement BACKLASH_ENGAGE_FIRST), the engagement time on its grid, then the
         # half-width refined around the best
