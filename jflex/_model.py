@@ -206,8 +206,8 @@ def _static_forces(model: Model, t, x, xd, z):
     with their first derivatives, so this is all a linearisation about rest needs."""
     r, lay = model.rigid, model.layout
     n, nx = r.nq, lay.nx
-    z = jnp.zeros_like(x[:n])
-    g = _pad(_rnea(r, x[:n], z, z, None, "linearize"), n, nx)
+    rest = jnp.zeros_like(x[:n])  # (not z: that name holds the effects' states below)
+    g = _pad(_rnea(r, x[:n], rest, rest, None, "linearize"), n, nx)
     dV = jax.grad(lambda x_: _effect_energy(model, x_, jnp.zeros_like(x_))[1])(x)
     f = jnp.zeros(nx, dtype=x.dtype)
     for e, s in zip(model.effects, lay.slots):
