@@ -24,7 +24,7 @@ from ._case import Case, load_case
 from ._inertia import link_moves
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
-from ._selection import (MIN_NAMED_SHRINK, NESTED, Selection, forward_select, gap_summary, ic_delta,
+from ._selection import (MIN_NAMED_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
                          is_significant, rank_entries, step_record, stop_reason, verdict)
 from ._signatures import SIGNATURE_NAMES, n_params, signatures
 from ._where import where
@@ -134,11 +134,10 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
 
     sel = forward_select(nom, ev0, floor, pool, refit, n_params=lambda c: n_params(c, pb.user), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
-                         first=fitted, on_select=on_select)
-    # an honest 'unexplained': a first effect that closes less than MIN_NAMED_SHRINK % of the
-    # excess is not named (the least bad candidate is not a diagnosis); the search stops there
-    if sel.steps and sel.steps[0].step_shrink < MIN_NAMED_SHRINK:
-        sel = Selection([], nom, ev0, "weak", sel.steps[0])
+                         first=fitted, on_select=on_select,
+                         # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of
+                         # the excess is not named (the least bad candidate is not a diagnosis)
+                         min_first_shrink=MIN_NAMED_SHRINK)
     selected = []
     for st in sel.steps:
         selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score))

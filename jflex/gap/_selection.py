@@ -97,7 +97,7 @@ class Selection:
 
 
 def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
-                   simpler=None, first=None, on_select=None) -> Selection:
+                   simpler=None, first=None, on_select=None, min_first_shrink: float = 0.0) -> Selection:
     """Forward selection on held-out data, the rules of :func:`diagnose`: each round refits every
     candidate not yet added on top of the current model, takes the one closing the most of the
     current excess gap (rounded to a point, so that noise-level differences tie; the information
@@ -116,6 +116,8 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
       same place wins when it closes within ``PARSIMONY`` points of it.
     - ``first``: optional ``{cand: (state, ev)}`` of first-round refits already made.
     - ``on_select(step)``: optional callback after each selected step.
+    - ``min_first_shrink``: the first effect must close at least this % of the excess to be taken
+      (stop reason ``"weak"``): below it, nothing is named and no further round is searched.
     """
     if not is_significant(ev0, floor):
         return Selection([], state0, ev0, "not significant")
@@ -146,6 +148,8 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
         step = best[1]
         if step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK:
             return Selection(steps, state, ev_cur, "too small", step)
+        if not steps and step.step_shrink < min_first_shrink:
+            return Selection(steps, state, ev_cur, "weak", step)
         steps.append(step)
         chosen.append(step.cand)
         state, ev_cur = step.state, step.ev
