@@ -108,7 +108,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     significant = is_significant(ev0, floor)
     for c in keep:
         st, ev = fitted[c]
-        score = -ic_delta(ev, ev0, n_params(c, pb.user))
+        score = -ic_delta(ev, ev0, n_params(c, pb.user, bool(pb.ttrain)))
         ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c)))
         say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
     order = rank_entries(ranking)
@@ -132,7 +132,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     def on_select(step):
         say(f"selected {step.cand.label(pb.names)}: gap {gap_summary(step.ev, floor)[0]:.2f} %")
 
-    sel = forward_select(nom, ev0, floor, pool, refit, n_params=lambda c: n_params(c, pb.user), max_effects=max_effects if keep else 0,
+    sel = forward_select(nom, ev0, floor, pool, refit, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain)), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select,
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of

@@ -9,9 +9,13 @@ import numpy as np
 from ._problem import TORQUE_EFFECTS, Candidate, Problem, State
 from . import _torque as T
 
-def n_params(c: Candidate, user=None) -> int:
+def n_params(c: Candidate, user=None, torque: bool = True) -> int:
+    """Parameters ``c`` adds; a payload is its 10 inertial parameters on torque data, one point
+    mass on FRF/modal data alone."""
     if user and c in user:
         return user[c].size
+    if c.effect == "payload" and not torque:
+        return 1
     return {"stribeck_friction": 3, "gravity_compensator": 4, "payload": 10, "orthogonal_compliance": 4,
             "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2,
             "backlash": 1 + len(T.BACKLASH_PULSES)}.get(c.effect, 1)
