@@ -169,3 +169,18 @@ def test_generators_and_bench_stay_outside_the_library():
             "print(bad); sys.exit(1 if bad else 0)\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_flexible_joint_in_torque_logs_is_found(tmp_path):
+    # a gravity-loaded flexible joint simulated with SciPy (benchmarks/gap/independent): the motor
+    # follows the trajectory, the link lags through the spring; the log holds quantised motor angles
+    from independent import make_case
+
+    folder, truth = make_case(tmp_path / "fj", kind="torque", robot="arm3", effects=("joint_flexibility",), seed=1)
+    planted = truth["effects"][0]
+    r = diagnose(folder).result
+    assert r["verdict"] == "explained"
+    assert [(s["effect"], s["joint"]) for s in r["selected"]][:1] == [("joint_flexibility", planted["joint"])]
+    # first order in the compliance, the spring's own damping left out: within 30 %
+    c = r["parameters"]["torque"][f"joint_flexibility@{planted['joint']}"]["compliance 1/k [rad/(N m)]"]
+    assert abs(1.0 / c - planted["params"]["k"]) < 0.3 * planted["params"]["k"]
