@@ -24,7 +24,7 @@ from ._case import Case, load_case
 from ._inertia import link_moves
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
-from ._selection import (MIN_NAMED_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
+from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
                          is_significant, rank_entries, step_record, stop_reason, verdict)
 from ._signatures import SIGNATURE_NAMES, n_params, signatures
 from ._where import where
@@ -136,8 +136,10 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select,
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of
-                         # the excess is not named (the least bad candidate is not a diagnosis)
-                         min_first_shrink=MIN_NAMED_SHRINK)
+                         # the excess is not named (the least bad candidate is not a diagnosis), unless it
+                         # supplies a measured mode the model lacked (a missing degree of freedom)
+                         min_first_shrink=lambda st: (MIN_STEP_SHRINK if supplies_missing_mode(ev0, st.ev)
+                                                      else MIN_NAMED_SHRINK))
     selected = []
     for st in sel.steps:
         selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score))
@@ -180,6 +182,21 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         units={"gap": "NRMSE %", "noise_floor": "NRMSE %", "shrink": "% of the excess over noise closed"},
     )
     return Diagnosis(result, pb, nom, state, steps)
+
+
+UNMATCHED = 0.1  # a measured mode more than 10 % from every model mode is one the model lacks
+
+
+def supplies_missing_mode(ev0: dict, ev: dict) -> bool:
+    """Whether a model evaluated as ``ev`` matches (within UNMATCHED) a measured mode of some modal
+    validation set that the nominal model ``ev0`` left unmatched: structural evidence of a missing
+    degree of freedom, beyond what the gap's shrink measures."""
+    for k, r0 in ev0.items():
+        if r0["kind"] == "modal" and k in ev:
+            e0, e1 = np.abs(np.asarray(r0["ef"])), np.abs(np.asarray(ev[k]["ef"]))
+            if np.any((e0 > UNMATCHED) & (e1 <= UNMATCHED)):
+                return True
+    return False
 
 
 def _failed_solves(model: str, ev: dict) -> list:

@@ -97,7 +97,7 @@ class Selection:
 
 
 def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
-                   simpler=None, first=None, on_select=None, min_first_shrink: float = 0.0) -> Selection:
+                   simpler=None, first=None, on_select=None, min_first_shrink=0.0) -> Selection:
     """Forward selection on held-out data, the rules of :func:`diagnose`: each round refits every
     candidate not yet added on top of the current model, takes the one closing the most of the
     current excess gap (rounded to a point, so that noise-level differences tie; the information
@@ -117,7 +117,9 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
     - ``first``: optional ``{cand: (state, ev)}`` of first-round refits already made.
     - ``on_select(step)``: optional callback after each selected step.
     - ``min_first_shrink``: the first effect must close at least this % of the excess to be taken
-      (stop reason ``"weak"``): below it, nothing is named and no further round is searched.
+      (stop reason ``"weak"``): below it, nothing is named and no further round is searched. A
+      number, or ``callable(step) -> number`` (e.g. lower for an effect that supplies a measured
+      mode the model lacked).
     """
     if not is_significant(ev0, floor):
         return Selection([], state0, ev0, "not significant")
@@ -148,7 +150,8 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
         step = best[1]
         if step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK:
             return Selection(steps, state, ev_cur, "too small", step)
-        if not steps and step.step_shrink < min_first_shrink:
+        need = min_first_shrink(step) if callable(min_first_shrink) else min_first_shrink
+        if not steps and step.step_shrink < need:
             return Selection(steps, state, ev_cur, "weak", step)
         steps.append(step)
         chosen.append(step.cand)
@@ -167,13 +170,14 @@ def step_record(added, ev, floor) -> dict:
 
 def verdict(significant: bool, remaining: bool, named: bool, shrink: float) -> str:
     """``within_noise`` (no significant gap), ``explained`` (the named effects leave a gap within
-    noise or close EXPLAINED_SHRINK % of the excess), ``partly_explained`` (they close at least
-    MIN_NAMED_SHRINK %), else ``unexplained``."""
+    noise or close EXPLAINED_SHRINK % of the excess), ``partly_explained`` (an effect was named:
+    it closed at least MIN_NAMED_SHRINK %, or supplied a measured mode the model lacked), else
+    ``unexplained``."""
     if not significant:
         return "within_noise"
     if named and (not remaining or shrink >= EXPLAINED_SHRINK):
         return "explained"
-    if named and shrink >= MIN_NAMED_SHRINK:
+    if named:
         return "partly_explained"
     return "unexplained"
 
