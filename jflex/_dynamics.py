@@ -128,10 +128,12 @@ def rnea(robot: Robot, q, qd, qdd, f_ext=None):
     return _rnea(robot, q, qd, qdd, f_ext, "rnea")
 
 
-def _rnea(robot: Robot, q, qd, qdd, f_ext, fn):
+def _rnea(robot: Robot, q, qd, qdd, f_ext, fn, check=True):
     """:func:`rnea` without the inertia check (a :class:`jflex.Model`'s effects may carry all the
-    mass of a kinematic robot); ``fn`` names the caller in messages."""
-    q, qd, qdd, f_ext = _checked(fn, robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
+    mass of a kinematic robot); ``fn`` names the caller in messages; ``check=False``: the caller
+    checked the arguments."""
+    if check:
+        q, qd, qdd, f_ext = _checked(fn, robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
     c = consts(robot)
     ls = walk(robot, c, q, qd, qdd)
     ns, fs = accumulate(robot, ls, *_body_forces(robot, c, ls, f_ext), fence=c.fence)
@@ -175,9 +177,10 @@ def crba(robot: Robot, q):
     return _crba(robot, q, "crba")
 
 
-def _crba(robot: Robot, q, fn):
+def _crba(robot: Robot, q, fn, check=True):
     """:func:`crba` without the inertia check (see :func:`_rnea`)."""
-    (q,) = _checked(fn, robot, q=q)
+    if check:
+        (q,) = _checked(fn, robot, q=q)
     n = robot.nq
     c = consts(robot)
     ls = walk(robot, c, q)
@@ -345,13 +348,14 @@ def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
         raise ValueError(f"forward_dynamics: method must be 'aba' or 'crba', got '{method}'")
     fn = "forward_dynamics (method='crba')"
     moving_inertia(fn, robot)
-    (tau,) = _checked(fn, robot, tau=tau)
-    M = _crba(robot, q, fn)
-    h = _rnea(robot, q, qd, jnp.zeros_like(jnp.asarray(qd)), f_ext, fn)
+    q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
+    M = _crba(robot, q, fn, check=False)
+    h = _rnea(robot, q, qd, jnp.zeros_like(qd), f_ext, fn, check=False)
     L = jnp.linalg.cholesky(M)
-    L = guard(L, [~jnp.all(jnp.isfinite(L))], [
+    out = jax.scipy.linalg.cho_solve((L, True), tau - h)
+    # a matrix that is not positive definite leaves NaN on L's diagonal from the failing pivot on
+    return guard(out, [~jnp.all(jnp.isfinite(jnp.diagonal(L)))], [
         f"{fn}: the mass matrix is not positive definite (a joint moves no inertia?); check robot.inertia"])
-    return jax.scipy.linalg.cho_solve((L, True), tau - h)
 
 
 _UNIT_PARAMS = [s.Inertia.of([1.0 if j == k else 0.0 for j in range(10)]) for k in range(10)]
