@@ -5,6 +5,7 @@ Usage: python experiments/seed000_vibration.py [configs/seed000_vibration.yaml] 
 
 import pathlib
 import sys
+from typing import Annotated
 
 import jax.numpy as jnp
 import matplotlib
@@ -14,6 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jflex  # noqa: E402
+from pydantic import BaseModel, ConfigDict, Field  # noqa: E402
 
 HERE = pathlib.Path(__file__).resolve().parent
 
@@ -116,8 +118,45 @@ def run(cfg, out):
     return res
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+Ratio = Annotated[float, Field(ge=0)]
+
+
+class ForcedConfig(_Strict):
+    force_N: float = Field(description="harmonic force amplitude [N]")
+    frequency_ratios: Annotated[list[Positive], Field(min_length=1)] = Field(description="omega / omega_n")
+    damping_ratio: Ratio
+    settle_periods: Positive = Field(description="periods simulated before the fitted three")
+
+
+class DuhamelConfig(_Strict):
+    damping_ratio: Annotated[float, Field(ge=0, lt=1)] = Field(description="underdamped: the impulse response uses omega_d")
+    pulse_N: float = Field(description="half-sine pulse amplitude [N]")
+    pulse_duration_s: Positive
+
+
+class Seed000VibrationConfig(_Strict):
+    mass_kg: Positive
+    stiffness_N_per_m: Positive
+    damping_ratios: Annotated[list[Ratio], Field(min_length=1)] = Field(description="free responses, one per ratio")
+    x0_m: float
+    v0_m_per_s: float
+    t_end_s: Positive
+    samples: Annotated[int, Field(ge=2)]
+    forced: ForcedConfig
+    duhamel: DuhamelConfig
+    rtol: Positive
+    atol: Positive
+
+
 def main(argv=None):
-    return jflex.experiment_cli("seed000_vibration", HERE.parent / "configs" / "seed000_vibration.yaml", run, argv)
+    return jflex.experiment_cli("seed000_vibration", HERE.parent / "configs" / "seed000_vibration.yaml", run, argv,
+                                schema=Seed000VibrationConfig)
 
 
 if __name__ == "__main__":

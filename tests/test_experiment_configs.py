@@ -1,0 +1,100 @@
+"""Every experiment's config has a schema: the shipped configs validate to what the script reads
+today (plus defaults), and an unknown key, a negative physical number, a string where a number
+belongs and a NaN are refused with a ConfigError naming the file and the field. Nothing runs."""
+
+from __future__ import annotations
+
+import copy
+import functools
+import importlib.util
+import math
+import pathlib
+
+import pytest
+
+import jflex
+from jflex._schema import field_path, validate
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+# experiment: (schema class, configs it reads, a field that must be > 0, a plain numeric field)
+EXPERIMENTS = {
+    "seed000_vibration": ("Seed000VibrationConfig", ["seed000_vibration.yaml"],
+                          ("stiffness_N_per_m",), ("forced", "force_N")),
+}
+
+
+@functools.lru_cache(maxsize=None)
+def _module(name):
+    # loaded by path, as `jflex run` does (experiments are scripts, not a package)
+    spec = importlib.util.spec_from_file_location(f"jflex_experiment_{name}", ROOT / "experiments" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _schema(name):
+    return getattr(_module(name), EXPERIMENTS[name][0])
+
+
+def _set(cfg, path, value):
+    node = cfg
+    for k in path[:-1]:
+        node = node[k]
+    node[path[-1]] = value
+
+
+def _read_the_same(got, given, where=""):
+    """Every key the YAML gives reaches the script with the same value (defaults may be added)."""
+    if isinstance(given, dict):
+        assert isinstance(got, dict), where
+        for k, v in given.items():
+            assert k in got, f"{where}.{k} dropped"
+            _read_the_same(got[k], v, f"{where}.{k}")
+    elif isinstance(given, list):
+        assert isinstance(got, list) and len(got) == len(given), where
+        for i, (a, b) in enumerate(zip(got, given)):
+            _read_the_same(a, b, f"{where}[{i}]")
+    else:
+        assert got == given and type(got) in (type(given), float), f"{where}: {got!r} != {given!r}"
+
+
+CASES = [(name, cfg) for name, (_, cfgs, _, _) in EXPERIMENTS.items() for cfg in cfgs]
+
+
+@pytest.mark.parametrize("name,config", CASES)
+def test_shipped_config_validates_to_what_the_script_reads(name, config):
+    raw = jflex.load_yaml(ROOT / "configs" / config)
+    got = validate(_schema(name), copy.deepcopy(raw), config).model_dump()
+    _read_the_same(got, raw)
+
+
+def _refused(name, mutate, field):
+    cfg_name = EXPERIMENTS[name][1][0]
+    cfg = jflex.load_yaml(ROOT / "configs" / cfg_name)
+    mutate(cfg)
+    with pytest.raises(jflex.ConfigError) as exc:
+        validate(_schema(name), cfg, f"configs/{cfg_name}")
+    msg = str(exc.value)
+    assert f"configs/{cfg_name}" in msg and f"field '{field}'" in msg, msg
+    return msg
+
+
+@pytest.mark.parametrize("name", list(EXPERIMENTS))
+def test_unknown_key_refused(name):
+    msg = _refused(name, lambda c: c.update(not_a_key=1.0), "not_a_key")
+    assert "allowed keys" in msg
+
+
+@pytest.mark.parametrize("name", [n for n, e in EXPERIMENTS.items() if e[2] is not None])
+def test_negative_physical_number_refused(name):
+    path = EXPERIMENTS[name][2]
+    msg = _refused(name, lambda c: _set(c, path, -1.0), field_path(path))
+    assert "> 0" in msg
+
+
+@pytest.mark.parametrize("name", list(EXPERIMENTS))
+@pytest.mark.parametrize("bad", ["abc", math.nan, math.inf])
+def test_string_or_non_finite_number_refused(name, bad):
+    path = EXPERIMENTS[name][3]
+    _refused(name, lambda c: _set(c, path, bad), field_path(path))
