@@ -7,6 +7,7 @@ Usage: python experiments/seed004_damping.py [configs/seed004_rigid_flexible_arm
 
 import pathlib
 import sys
+from typing import Annotated
 
 import jax.numpy as jnp
 import matplotlib
@@ -18,6 +19,7 @@ import scipy.linalg as sl  # noqa: E402
 
 import jflex  # noqa: E402
 from jflex.effects import FlexibleLink, Fractional, Hysteretic, KelvinVoigt  # noqa: E402
+from pydantic import BaseModel, ConfigDict, Field, model_validator  # noqa: E402
 
 HERE = pathlib.Path(__file__).resolve().parent
 
@@ -153,8 +155,84 @@ def _spectrum(ts, y):
     return np.fft.rfftfreq(y.size, dt), (np.abs(Y) ** 2) * dt / y.size
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+
+
+class ArmConfig(_Strict):
+    rigid_link_length_m: Positive
+    I_R0_plus_mH_Lr2_kg_m2: Positive = Field(description="link 1 + hub inertia about joint 1 [kg m^2]")
+    I_H_kg_m2: Positive = Field(description="hub inertia about joint 2 [kg m^2]")
+    flexible_link_length_m: Positive
+    rho_A_kg_per_m: Positive
+    rho_I3_kg_m: Annotated[float, Field(ge=0)] = Field(description="rotary inertia per length (0: Euler-Bernoulli)")
+    EI3_N_m2: Positive
+    modes: Annotated[int, Field(ge=1)]
+
+
+class JointHoldConfig(_Strict):
+    kp_N_m_per_rad: Positive
+    kd_N_m_s_per_rad: Annotated[float, Field(ge=0)]
+
+
+class ViscousConfig(_Strict):
+    k_e_s: Annotated[float, Field(ge=0)] = Field(description="Kelvin-Voigt coefficient [s]")
+
+
+class FractionalConfig(_Strict):
+    k_e: Annotated[float, Field(ge=0)]
+    alpha: Annotated[float, Field(gt=0, le=1)] = Field(description="fractional order, in (0, 1]")
+
+
+class FractionalLawConfig(FractionalConfig):
+    band_rad_per_s: Annotated[list[Positive], Field(min_length=2, max_length=2)] = Field(
+        description="band of the rational approximation [rad/s]")
+    order: Annotated[int, Field(ge=1)]
+
+    @model_validator(mode="after")
+    def _band(self):
+        if self.band_rad_per_s[1] <= self.band_rad_per_s[0]:
+            raise ValueError(f"band_rad_per_s must rise, got {self.band_rad_per_s}")
+        return self
+
+
+class HystereticConfig(_Strict):
+    k_e: Annotated[float, Field(ge=0)]
+    h0_N: Positive
+    delta_m: Positive
+    reversal_rate_per_s: Positive
+
+
+class DampingConfig(_Strict):
+    viscous: ViscousConfig
+    fractional: FractionalLawConfig
+    hysteretic: HystereticConfig
+
+
+class ModesParametersConfig(_Strict):
+    viscous: ViscousConfig
+    fractional: FractionalConfig
+
+
+class Seed004DampingConfig(_Strict):
+    arm: ArmConfig
+    joint_hold: JointHoldConfig
+    damping: DampingConfig
+    modes_parameters: ModesParametersConfig
+    initial_tip_deflection_m: float
+    t_end_s: Positive
+    samples: Annotated[int, Field(ge=2)]
+    rtol: Positive
+    atol: Positive
+
+
 def main(argv=None):
-    return jflex.experiment_cli("seed004_damping", HERE.parent / "configs" / "seed004_rigid_flexible_arm.yaml", run, argv)
+    return jflex.experiment_cli("seed004_damping", HERE.parent / "configs" / "seed004_rigid_flexible_arm.yaml", run, argv,
+                                schema=Seed004DampingConfig)
 
 
 if __name__ == "__main__":

@@ -21,6 +21,8 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 EXPERIMENTS = {
     "seed000_vibration": ("Seed000VibrationConfig", ["seed000_vibration.yaml"],
                           ("stiffness_N_per_m",), ("forced", "force_N")),
+    "seed004_damping": ("Seed004DampingConfig", ["seed004_rigid_flexible_arm.yaml"],
+                        ("arm", "EI3_N_m2"), ("initial_tip_deflection_m",)),
 }
 
 
