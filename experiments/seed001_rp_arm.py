@@ -52,6 +52,7 @@ is chosen from the text or from Table 5 as described there.
 import pathlib
 import sys
 import time
+from typing import Annotated, Literal
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -63,6 +64,7 @@ import numpy as np  # noqa: E402
 
 import jflex  # noqa: E402
 from jflex.effects import AbstractEffect, FlexibleJoints, FlexibleLink, KelvinVoigt  # noqa: E402
+from pydantic import BaseModel, ConfigDict, Field, model_validator  # noqa: E402
 
 HERE = pathlib.Path(__file__).resolve().parent
 
@@ -322,8 +324,78 @@ def _plot_table5(res, out):
     plt.close(fig)
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+Count = Annotated[int, Field(ge=1)]
+
+
+class HubConfig(_Strict):
+    length_m: Positive
+    width_m: Positive
+    thickness_m: Positive
+    E_Pa: Positive = Field(description="Young's modulus [Pa]")
+    mass_per_length_kg_per_m: Positive
+    kelvin_voigt_Pa_s: NonNegative = Field(description="K_v [Pa s]; k_e = K_v / E")
+    modes: Count
+
+
+class LinkConfig(HubConfig):
+    air_damping_kg_per_s_m: NonNegative = Field(description="gamma")
+    free_length_at_start_m: Positive = Field(description="l_1(0), the link's length out of the hub")
+
+    @model_validator(mode="after")
+    def _fits(self):
+        if self.free_length_at_start_m > self.length_m:
+            raise ValueError(f"free_length_at_start_m ({self.free_length_at_start_m}) exceeds length_m ({self.length_m})")
+        return self
+
+
+class JointConfig(_Strict):
+    stiffness_N_m_per_rad: Positive
+    motor_inertia_kg_m2: Positive
+
+
+class LoadingConfig(_Strict):
+    revolute_torque_N_m: float
+    brake_time_s: Positive
+    brake_torque_N_m: NonNegative
+    brake_smoothing_rad_per_s: Positive
+    prismatic_switch_s: NonNegative
+    prismatic_stop_s: NonNegative
+
+
+class PrismaticDriveConfig(_Strict):
+    v_max_m_per_s: Positive
+    force_N: Positive
+    dv_m_per_s: Positive = Field(description="speed band over which the force falls to zero")
+    no_backdrive: bool
+
+
+class Seed001RpArmConfig(_Strict):
+    link: LinkConfig
+    hub: HubConfig
+    joint: JointConfig
+    gravity_m_per_s2: NonNegative = Field(description="along -z, the revolute axis")
+    loading: LoadingConfig
+    prismatic_drive: PrismaticDriveConfig
+    t_end_s: Positive
+    samples: Annotated[int, Field(ge=2)]
+    variants: Annotated[list[Literal["F.L-R.H", "F.L-F.H", "F.L-F.H-F.J", "F.L-R.H-F.J"]], Field(min_length=1)]
+    rtol: Positive
+    atol: Positive
+    hub_atol: Positive = Field(description="atol of the flexible-hub variants")
+    max_steps: Count = 400_000
+    filled_why: dict[str, str] = Field(default_factory=dict, description="why each FILLED value (copied to results)")
+
+
 def main(argv=None):
-    return jflex.experiment_cli("seed001_rp_arm", HERE.parent / "configs" / "seed001_rp_arm_quick.yaml", run, argv)
+    return jflex.experiment_cli("seed001_rp_arm", HERE.parent / "configs" / "seed001_rp_arm_quick.yaml", run, argv,
+                                schema=Seed001RpArmConfig)
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ import json
 import math
 import os
 import pathlib
+import re
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -68,13 +69,25 @@ def write_results(run_dir: str | os.PathLike, results: Mapping[str, Any], name: 
     return path
 
 
+class _Loader(yaml.SafeLoader):
+    """Safe loading that reads ``2.1e11`` as a number, as YAML 1.2 does: YAML 1.1 wants
+    ``2.1e+11`` and PyYAML hands the rest over as strings, which a schema rightly refuses."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
+    list("-+.0123456789"),
+)
+
+
 def load_yaml(path: str | os.PathLike) -> dict:
     """Read a YAML mapping; a missing file or a non-mapping top level is a :class:`ConfigError`."""
     path = pathlib.Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_Loader)
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (undecodable byte at offset {exc.start})") from None
     except yaml.YAMLError as exc:

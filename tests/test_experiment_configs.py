@@ -23,6 +23,8 @@ EXPERIMENTS = {
                           ("stiffness_N_per_m",), ("forced", "force_N")),
     "seed004_damping": ("Seed004DampingConfig", ["seed004_rigid_flexible_arm.yaml"],
                         ("arm", "EI3_N_m2"), ("initial_tip_deflection_m",)),
+    "seed001_rp_arm": ("Seed001RpArmConfig", ["seed001_rp_arm_quick.yaml", "seed001_rp_arm.yaml"],
+                       ("joint", "stiffness_N_m_per_rad"), ("loading", "revolute_torque_N_m")),
 }
 
 
@@ -100,3 +102,10 @@ def test_negative_physical_number_refused(name):
 def test_string_or_non_finite_number_refused(name, bad):
     path = EXPERIMENTS[name][3]
     _refused(name, lambda c: _set(c, path, bad), field_path(path))
+
+
+def test_exponent_without_sign_is_a_number(tmp_path):
+    # YAML 1.1 (PyYAML) reads 1.9e11 as a string; the shipped configs write E that way
+    f = tmp_path / "c.yaml"
+    f.write_text("a: 1.9e11\nb: -2E-3\nc: .5e2\nd: [1e5, 7]\ne: .e5\nf: 1e\n")
+    assert jflex.load_yaml(f) == {"a": 1.9e11, "b": -2e-3, "c": 50.0, "d": [1e5, 7], "e": ".e5", "f": "1e"}
