@@ -4,17 +4,17 @@ Usage: ``python experiments/press_bdc.py [configs/press.yaml] [--out DIR]``. Wri
 ``results.json`` and plots into the run folder. See docs/press.md.
 """
 
-from __future__ import annotations
-
 import pathlib
 import sys
 import time
+from typing import Annotated, Literal
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 import jflex
 from jflex import fem
@@ -180,8 +180,113 @@ def run(cfg: dict, out: pathlib.Path) -> dict:
     return res
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+
+
+class MaterialConfig(_Strict):
+    E: Positive = Field(description="Young's modulus [Pa]")
+    rho: Positive = Field(description="density [kg/m^3]")
+
+
+class SectionConfig(_Strict):
+    depth: Positive = Field(description="in the plane of motion [m]")
+    thickness: Positive = Field(description="normal to the plane [m]")
+
+
+class SectionsConfig(_Strict):
+    crank: SectionConfig
+    rod: SectionConfig
+    deputy: SectionConfig
+    toggle: SectionConfig
+    upper: SectionConfig
+    oscillating: SectionConfig
+    lower: SectionConfig
+    main: SectionConfig
+
+
+class PressConfig(_Strict):
+    """The press at BDC, right-hand side (fem.press_from_config reads it)."""
+
+    crank_pivot: Point
+    crank_radius: Positive
+    rod_length: Positive
+    deputy_half_width: Positive
+    deputy_mass: Positive
+    rocker_pivot: Point
+    upper_link_length: Positive
+    toggle_pin_offset: Point
+    lower_link_length: Positive
+    main_half_width: Positive
+    main_mass: Positive
+    pin_mass: Annotated[float, Field(ge=0)]
+    bdc_crank_angle_deg: float = 90.0
+    material: MaterialConfig
+    sections: SectionsConfig
+    elements_per_link: Annotated[int, Field(ge=1)] = 3
+
+    @field_validator("bdc_crank_angle_deg")
+    @classmethod
+    def _bdc(cls, v):
+        if v != 90.0:
+            raise ValueError(f"only 90 (seed 002's convention) is supported, got {v!r}")
+        return v
+
+
+class JointBarsConfig(_Strict):
+    bar_area: Positive
+    bar_length: Positive
+    E_tension: Positive
+    E_compression: Positive
+    E_transverse: Positive
+
+
+class DampingConfig(_Strict):
+    type: Literal["modal", "rayleigh"] = "modal"
+    zeta: Positive = 0.05
+
+
+class CrosscheckConfig(_Strict):
+    speed_spm: Positive | None = Field(None, description="default: the highest speed")
+    substeps: Annotated[int, Field(ge=1)] = 4
+    n_periods: Annotated[int, Field(ge=1)] = 3
+
+
+class ExperimentConfig(_Strict):
+    speeds_spm: Annotated[list[Positive], Field(min_length=2)] = [200.0, 300.0, 400.0, 500.0, 600.0]
+    poses_per_rev: Annotated[int, Field(ge=16)] = 360
+    damping: DampingConfig = DampingConfig()
+    n_modes: Annotated[int, Field(ge=1)] | None = Field(None, description="modes kept (default: all)")
+    static_correction: bool = True
+    plot_speeds_spm: list[Positive] | None = Field(None, description="default: the lowest and highest speed")
+    n_frequencies: Annotated[int, Field(ge=1)] = 6
+    crosscheck: CrosscheckConfig = CrosscheckConfig()
+    paper: dict[str, float] = Field(default_factory=dict, description="the paper's figures, echoed in results")
+
+    @model_validator(mode="after")
+    def _speed_defaults(self):
+        # the defaults that depend on the speeds, as run() computed them before the schema
+        if self.plot_speeds_spm is None:
+            self.plot_speeds_spm = [self.speeds_spm[0], self.speeds_spm[-1]]
+        if self.crosscheck.speed_spm is None:
+            self.crosscheck.speed_spm = max(self.speeds_spm)
+        return self
+
+
+class PressBdcConfig(_Strict):
+    press: PressConfig
+    joints: JointBarsConfig
+    experiment: ExperimentConfig = ExperimentConfig()
+
+
 def main(argv=None):
-    return jflex.experiment_cli(NAME, DEFAULT, run, sys.argv[1:] if argv is None else argv, description=__doc__)
+    return jflex.experiment_cli(NAME, DEFAULT, run, sys.argv[1:] if argv is None else argv, description=__doc__,
+                                schema=PressBdcConfig)
 
 
 if __name__ == "__main__":
