@@ -17,11 +17,10 @@ Usage: ``python experiments/gap_seed002.py [configs/gap_seed002.yaml] [--out DIR
 plots into the run folder. See docs/press.md.
 """
 
-from __future__ import annotations
-
 import pathlib
 import sys
 import time
+from typing import Annotated, Any, Literal
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -30,6 +29,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 import jflex
 from jflex import fem
@@ -504,8 +504,91 @@ def _plots(out, S, data, curves, truth, result, p, meas):
     plt.close(fig)
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+Speeds = Annotated[list[Positive], Field(min_length=1)]
+
+
+def _press_fields():
+    # the press section's keys are press_bdc's schema (the experiment folder is not a package)
+    name = "jflex_experiment_press_bdc"
+    if name not in sys.modules:
+        import importlib.util
+
+        spec = importlib.util.spec_from_file_location(name, pathlib.Path(__file__).with_name("press_bdc.py"))
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    return list(sys.modules[name].PressConfig.model_fields)
+
+
+class TruthConfig(_Strict):
+    joint_factors: dict[str, Positive] = Field(description="stiffness factor of each pin on the paper's bar moduli")
+    tension_factor: Positive = 1.0
+    perfect_joints: bool = False
+
+    @field_validator("joint_factors")
+    @classmethod
+    def _pins(cls, v):
+        if set(v) != set(JOINT_NAMES):
+            raise ValueError(f"expected exactly the pins {', '.join(JOINT_NAMES)}, got {sorted(v)}")
+        return v
+
+
+class NoiseConfig(_Strict):
+    sigma_mm: Positive = Field(description="one record's BDC reading noise [mm]")
+    repeats: Annotated[int, Field(ge=2)] = Field(description="records per speed (the data are their mean)")
+    seed: int = 0
+
+
+class FitConfig(_Strict):
+    grid_points: Annotated[int, Field(ge=3)] = 9
+    golden_steps: Annotated[int, Field(ge=0)] = 8
+
+
+class GapConfig(_Strict):
+    poses_per_rev: Annotated[int, Field(ge=16)] = 120
+    n_modes: Annotated[int, Field(ge=1)] = 30
+    zeta: Positive = Field(0.05, description="nominal modal damping ratio")
+    train_speeds_spm: Speeds
+    validation_bands_spm: Annotated[list[Speeds], Field(min_length=1)] = Field(description="one validation set per band")
+    truth: TruthConfig
+    noise: NoiseConfig
+    candidates: Annotated[list[Literal[EFFECTS]], Field(min_length=1)] = list(EFFECTS)
+    max_effects: Annotated[int, Field(ge=1)] = 2
+    fit: FitConfig = FitConfig()
+    paper: dict[str, float] = Field(default_factory=dict, description="the paper's figures, echoed in results")
+
+    @model_validator(mode="after")
+    def _distinct(self):
+        val = [s for b in self.validation_bands_spm for s in b]
+        if len(set(val)) != len(val) or set(val) & set(self.train_speeds_spm):
+            raise ValueError("validation speeds must be distinct and not among the training speeds")
+        return self
+
+
+class GapSeed002Config(_Strict):
+    press_config: str = Field("press.yaml", description="the press (relative to configs/ unless absolute)")
+    press_overrides: dict[str, Any] = Field(default_factory=dict, description="press fields replacing the file's")
+    gap: GapConfig
+
+    @field_validator("press_overrides")
+    @classmethod
+    def _press_keys(cls, v):
+        known = _press_fields()
+        for k in v:
+            if k not in known:
+                raise ValueError(f"unknown press field {k!r}; allowed: {known}")
+        return v
+
+
 def main(argv=None):
-    jflex.experiment_cli(NAME, DEFAULT, run, sys.argv[1:] if argv is None else argv, description=__doc__.splitlines()[0])
+    jflex.experiment_cli(NAME, DEFAULT, run, sys.argv[1:] if argv is None else argv, description=__doc__.splitlines()[0],
+                         schema=GapSeed002Config)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ EXPERIMENTS = {
                         ("arm", "EI3_N_m2"), ("initial_tip_deflection_m",)),
     "seed001_rp_arm": ("Seed001RpArmConfig", ["seed001_rp_arm_quick.yaml", "seed001_rp_arm.yaml"],
                        ("joint", "stiffness_N_m_per_rad"), ("loading", "revolute_torque_N_m")),
+    "gap_seed002": ("GapSeed002Config", ["gap_seed002.yaml"], ("gap", "noise", "sigma_mm"), ("gap", "zeta")),
     "press_bdc": ("PressBdcConfig", ["press.yaml"], ("press", "main_mass"), ("press", "crank_pivot", 0)),
 }
 
