@@ -83,11 +83,10 @@ See runs/<...>/results.json for every figure, iteration count and time.
     python experiments/identify_seed004.py [CONFIG] [--out DIR]
 """
 
-from __future__ import annotations
-
 import pathlib
 import sys
 import time
+from typing import Annotated, Literal
 
 import jax.numpy as jnp
 import matplotlib
@@ -96,6 +95,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import scipy.linalg as sl
+from pydantic import BaseModel, ConfigDict, Field
 
 import jflex
 from jflex import identify as idf
@@ -313,8 +313,76 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     return out
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+Count = Annotated[int, Field(ge=1)]
+Law = Literal["viscous", "fractional", "hysteretic"]
+Pair = Annotated[list[Positive], Field(min_length=2, max_length=2)]
+
+
+class ViscousStart(_Strict):
+    k_e_s: Positive
+
+
+class FractionalStart(_Strict):
+    k_e: Positive
+    alpha: Annotated[float, Field(gt=0, le=1)]
+
+
+class StartConfig(_Strict):
+    viscous: ViscousStart
+    fractional: FractionalStart
+    hysteretic_factor: Pair = Field(description="h0, delta start factors on the planted values")
+
+
+class MultiStartConfig(_Strict):
+    n: Count = Field(description="Latin-hypercube candidates")
+    keep: Count = Field(description="Levenberg-Marquardt runs from the cheapest candidates")
+    bounds: dict[str, Pair] = Field(default_factory=dict, description="parameter -> [low, high]")
+    seed: int = 0
+
+
+class PlantedConfig(_Strict):
+    rho_A_kg_per_m: Positive
+    EI3_N_m2: Positive
+
+
+class StaticConfig(_Strict):
+    planted: PlantedConfig
+    loads_N: Annotated[list[float], Field(min_length=1)] = Field(description="tip loads, upward")
+    noise_m: Annotated[float, Field(ge=0)]
+
+
+class IdentifySeed004Config(_Strict):
+    arm: str = Field(description="the arm config, relative to configs/")
+    truth_law: Literal["hysteretic"] = Field("hysteretic", description="the law that makes the record")
+    noise_fraction_of_peak: Annotated[float, Field(ge=0)]
+    hysteretic_reversal_width_m: Positive | None = Field(None, description="None: the arm's time-driven reversal")
+    t_end_s: Positive
+    samples: Annotated[int, Field(ge=2)]
+    truth_rtol: Positive
+    truth_atol: Positive
+    fit_rtol: Positive
+    fit_atol: Positive
+    fit_max_solver_steps: Count = 100_000
+    max_steps: Count = Field(description="Levenberg-Marquardt iterations per start")
+    lm_tol: Positive
+    stall: Count | None = None
+    start: StartConfig
+    multistart: dict[Law, MultiStartConfig] = Field(default_factory=dict)
+    static: StaticConfig
+    single_start_also: list[Law] = Field(default_factory=list)
+    final_tolerances: dict[Law, dict[Literal["rtol", "atol"], Positive]] = Field(default_factory=dict)
+    stages_s: dict[Law, list[Positive]] = Field(default_factory=dict, description="record lengths fitted first")
+
+
 def main(argv=None):
-    return jflex.experiment_cli("identify_seed004", DEFAULT, run, argv, description=__doc__)
+    return jflex.experiment_cli("identify_seed004", DEFAULT, run, argv, description=__doc__,
+                                schema=IdentifySeed004Config)
 
 
 if __name__ == "__main__":

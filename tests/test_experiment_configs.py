@@ -26,6 +26,8 @@ EXPERIMENTS = {
     "seed001_rp_arm": ("Seed001RpArmConfig", ["seed001_rp_arm_quick.yaml", "seed001_rp_arm.yaml"],
                        ("joint", "stiffness_N_m_per_rad"), ("loading", "revolute_torque_N_m")),
     "gap_seed002": ("GapSeed002Config", ["gap_seed002.yaml"], ("gap", "noise", "sigma_mm"), ("gap", "zeta")),
+    "identify_seed004": ("IdentifySeed004Config", ["identify_seed004.yaml"], ("static", "planted", "EI3_N_m2"),
+                         ("static", "loads_N", 1)),
     "press_bdc": ("PressBdcConfig", ["press.yaml"], ("press", "main_mass"), ("press", "crank_pivot", 0)),
 }
 
