@@ -30,9 +30,8 @@ Every parameter within 4 std.
     python experiments/identify_synthetic.py [CONFIG] [--out DIR]
 """
 
-from __future__ import annotations
-
 import pathlib
+from typing import Annotated
 
 import jax
 import jax.numpy as jnp
@@ -41,6 +40,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
 
 import jflex
 from jflex import identify as idf
@@ -255,8 +255,91 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     return out
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+Count = Annotated[int, Field(ge=1)]
+
+
+def _per_joint(item):
+    """One value per joint of the 3-joint arm."""
+    return Annotated[list[item], Field(min_length=3, max_length=3)]
+
+
+class StartsConfig(_Strict):
+    random: Annotated[int, Field(ge=0)] = Field(0, description="random +/-50 % starts besides all + and all -")
+
+
+class ExcitationConfig(_Strict):
+    n_harmonics: Count
+    omega_f_rad_per_s: Positive
+    n_design_samples: Count
+    max_steps: Count
+
+
+class RigidFrictionConfig(_Strict):
+    viscous_N_m_s_per_rad: _per_joint(NonNegative)
+    coulomb_N_m: _per_joint(NonNegative)
+    compensator_N_m: _per_joint(float) = Field(description="B_1..B_3 of Eq. 2.11 on joint 2")
+    excitation: ExcitationConfig
+    sample_rate_Hz: Positive
+    periods: Positive = Field(description="excitation periods recorded")
+    position_noise_rad: NonNegative
+    torque_noise_N_m: _per_joint(NonNegative)
+    cutoff_Hz: Positive
+
+
+class FlexibleJointsConfig(_Strict):
+    stiffness_N_m_per_rad: _per_joint(Positive)
+    damping_N_m_s_per_rad: _per_joint(NonNegative)
+    postures_rad: Annotated[list[_per_joint(float)], Field(min_length=1)]
+    # a list in YAML, unpacked as (low, high, points): strict=False lets the list in, the items stay strict
+    f_Hz: tuple[Annotated[float, Strict(), Field(gt=0)], Annotated[float, Strict(), Field(gt=0)],
+                Annotated[int, Strict(), Field(ge=2)]] = Field(strict=False, description="[low, high, points]")
+    noise_fraction: NonNegative = Field(description="complex multiplicative noise on every FRF entry")
+
+    @model_validator(mode="after")
+    def _band(self):
+        if self.f_Hz[1] <= self.f_Hz[0]:
+            raise ValueError(f"f_Hz: high ({self.f_Hz[1]}) must exceed low ({self.f_Hz[0]})")
+        return self
+
+
+class FlexibleLinkConfig(_Strict):
+    length_m: Positive
+    rho_A_kg_per_m: Positive
+    EI_N_m2: Positive
+    k_e_s: Positive = Field(description="Kelvin-Voigt coefficient [s] (fitted in log: > 0)")
+    modes: Count
+    t_end_s: Positive
+    samples: Annotated[int, Field(ge=2)]
+    initial_tip_m: float
+    noise_fraction_of_peak: NonNegative
+    truth_rtol: Positive
+    truth_atol: Positive
+    fit_rtol: Positive
+    fit_atol: Positive
+    lm_tol: Positive
+
+
+class IdentifySyntheticConfig(_Strict):
+    seed: int = 0
+    tolerance_std: Positive = Field(description="recovered: |estimate - truth| below this many std")
+    starts: StartsConfig = Field(default_factory=StartsConfig)
+    lm_tol: Positive = 1e-8
+    max_steps: Count = 60
+    rigid_friction: RigidFrictionConfig
+    flexible_joints: FlexibleJointsConfig
+    flexible_link: FlexibleLinkConfig
+
+
 def main(argv=None):
-    return jflex.experiment_cli("identify_synthetic", DEFAULT, run, argv, description=__doc__)
+    return jflex.experiment_cli("identify_synthetic", DEFAULT, run, argv, description=__doc__,
+                                schema=IdentifySyntheticConfig)
 
 
 if __name__ == "__main__":

@@ -28,6 +28,8 @@ EXPERIMENTS = {
     "gap_seed002": ("GapSeed002Config", ["gap_seed002.yaml"], ("gap", "noise", "sigma_mm"), ("gap", "zeta")),
     "identify_seed004": ("IdentifySeed004Config", ["identify_seed004.yaml"], ("static", "planted", "EI3_N_m2"),
                          ("static", "loads_N", 1)),
+    "identify_synthetic": ("IdentifySyntheticConfig", ["identify_synthetic.yaml"],
+                           ("flexible_joints", "stiffness_N_m_per_rad", 1), ("rigid_friction", "compensator_N_m", 0)),
     "press_bdc": ("PressBdcConfig", ["press.yaml"], ("press", "main_mass"), ("press", "crank_pivot", 0)),
 }
 
@@ -60,7 +62,7 @@ def _read_the_same(got, given, where=""):
             assert k in got, f"{where}.{k} dropped"
             _read_the_same(got[k], v, f"{where}.{k}")
     elif isinstance(given, list):
-        assert isinstance(got, list) and len(got) == len(given), where
+        assert isinstance(got, (list, tuple)) and len(got) == len(given), where
         for i, (a, b) in enumerate(zip(got, given)):
             _read_the_same(a, b, f"{where}[{i}]")
     else:
