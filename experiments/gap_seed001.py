@@ -26,13 +26,12 @@ Levenberg-Marquardt iteration on its (r, J) is a few lines of NumPy. The paramet
 transforms.
 """
 
-from __future__ import annotations
-
 import copy
 import importlib.util
 import pathlib
 import sys
 import time
+from typing import Annotated, Literal
 
 import diffrax
 import equinox as eqx
@@ -43,6 +42,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from pydantic import BaseModel, ConfigDict, Field, model_validator  # noqa: E402
 
 import jflex  # noqa: E402
 from jflex.effects import FlexibleJoints  # noqa: E402
@@ -626,8 +626,109 @@ def run(cfg, out):
     return res
 
 
+# --- the config's schema (jflex.experiment_cli validates the YAML against it) ------------------------
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+Positive = Annotated[float, Field(gt=0)]
+Count = Annotated[int, Field(ge=1)]
+
+
+class ModelConfig(_Strict):
+    link_modes: Count
+    hub_modes: Count
+
+
+class RecordConfig(_Strict):
+    t_end_s: Positive
+    samples: Annotated[int, Field(ge=2)]
+    prismatic_switch_s: Positive
+    prismatic_stop_s: Positive
+    brake_time_s: Positive
+
+    @model_validator(mode="after")
+    def _brake_inside(self):
+        if not self.brake_time_s < self.t_end_s:
+            raise ValueError(f"brake_time_s ({self.brake_time_s}) must lie before t_end_s ({self.t_end_s})")
+        return self
+
+
+class LoadingConfig(_Strict):
+    revolute_torque_N_m: Positive
+    brake_torque_N_m: Positive
+    v_max_m_per_s: Positive
+
+
+class RecordsConfig(_Strict):
+    train: LoadingConfig
+    validation: LoadingConfig = Field(description="held-out inputs")
+
+
+class NoiseConfig(_Strict):
+    """Standard deviation per channel (each channel read needs its own; a zero would make a zero floor)."""
+
+    q1_deg: Positive | None = None
+    dq1_deg_per_s: Positive | None = None
+    tip_deflection_mm: Positive | None = None
+    free_length_mm: Positive | None = None
+    seed: int = 0
+    validation_repeats: Annotated[int, Field(ge=2)] = Field(description="independent validation records: the noise floor")
+
+
+class StartConfig(_Strict):
+    joint_stiffness_N_m_per_rad: Positive
+    joint_damping_N_m_s_per_rad: Positive
+    hub_EI_scale: Positive
+
+
+class FitConfig(_Strict):
+    max_steps: Count = Field(description="Levenberg-Marquardt steps per refit")
+    refit: Literal["all", "added"] = Field(description="added: only the new effect's parameters")
+
+
+class LadderConfig(_Strict):
+    candidates: Annotated[list[Literal[tuple(EFFECTS)]], Field(min_length=1)]
+    complete: bool = False
+    null_check: bool = False
+    rank_always: bool = True
+
+    @model_validator(mode="after")
+    def _distinct(self):
+        if len(set(self.candidates)) != len(self.candidates):
+            raise ValueError(f"candidates must be distinct, got {self.candidates}")
+        return self
+
+
+class SolverConfig(_Strict):
+    rtol: Positive
+    atol: Positive
+    max_steps: Count
+
+
+class GapSeed001Config(_Strict):
+    base_config: str = Field(description="the seed-001 arm config, in configs/")
+    model: ModelConfig
+    record: RecordConfig
+    records: RecordsConfig
+    channels: Annotated[list[Literal[tuple(CHANNELS)]], Field(min_length=1)]
+    noise: NoiseConfig
+    start: StartConfig
+    fit: FitConfig
+    ladder: LadderConfig
+    solver: SolverConfig
+
+    @model_validator(mode="after")
+    def _noise_per_channel(self):
+        for c in self.channels:
+            if getattr(self.noise, CHANNELS[c][3]) is None:
+                raise ValueError(f"noise.{CHANNELS[c][3]} is missing: channel {c!r} is read")
+        return self
+
+
 def main(argv=None):
-    return jflex.experiment_cli("gap_seed001", CONFIGS / "gap_seed001.yaml", run, argv, description=__doc__)
+    return jflex.experiment_cli("gap_seed001", CONFIGS / "gap_seed001.yaml", run, argv, description=__doc__,
+                                schema=GapSeed001Config)
 
 
 if __name__ == "__main__":

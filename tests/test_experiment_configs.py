@@ -25,6 +25,8 @@ EXPERIMENTS = {
                         ("arm", "EI3_N_m2"), ("initial_tip_deflection_m",)),
     "seed001_rp_arm": ("Seed001RpArmConfig", ["seed001_rp_arm_quick.yaml", "seed001_rp_arm.yaml"],
                        ("joint", "stiffness_N_m_per_rad"), ("loading", "revolute_torque_N_m")),
+    "gap_seed001": ("GapSeed001Config", ["gap_seed001.yaml", "gap_seed001_full.yaml"],
+                    ("start", "joint_stiffness_N_m_per_rad"), ("noise", "q1_deg")),
     "gap_seed002": ("GapSeed002Config", ["gap_seed002.yaml"], ("gap", "noise", "sigma_mm"), ("gap", "zeta")),
     "identify_seed004": ("IdentifySeed004Config", ["identify_seed004.yaml"], ("static", "planted", "EI3_N_m2"),
                          ("static", "loads_N", 1)),
