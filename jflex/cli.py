@@ -169,8 +169,12 @@ def run_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
     }
 
 
-def _run(name, default, fn, args) -> int:
+def _run(name, default, fn, args, schema=None) -> int:
     cfg = load_yaml(args.config or default)
+    if schema is not None:  # unset optional keys stay absent: run_demo tests `"links" in cfg`
+        from ._schema import validate
+
+        cfg = validate(schema, cfg, args.config or default).model_dump(exclude_none=True)
     run_dir = make_run_dir(name, args.out)
     results = dict(fn(cfg, run_dir))
     results.setdefault("config", str(args.config or default))
@@ -204,7 +208,9 @@ def run_gap_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
 
 
 def cmd_demo(args) -> int:
-    return _run("demo", _default_config("demo.yaml"), run_gap_demo, args)
+    from ._demo_config import DemoConfig
+
+    return _run("demo", _default_config("demo.yaml"), run_gap_demo, args, schema=DemoConfig)
 
 
 def cmd_run(args) -> int:

@@ -32,6 +32,8 @@ EXPERIMENTS = {
                          ("static", "loads_N", 1)),
     "identify_synthetic": ("IdentifySyntheticConfig", ["identify_synthetic.yaml"],
                            ("flexible_joints", "stiffness_N_m_per_rad", 1), ("rigid_friction", "compensator_N_m", 0)),
+    # not an experiment script: `jflex demo` (jflex/cli.py) reads configs/demo.yaml
+    "demo": ("DemoConfig", ["demo.yaml"], ("links", 1, "mass"), ("grid", "q2_deg", 0)),
     "press_bdc": ("PressBdcConfig", ["press.yaml"], ("press", "main_mass"), ("press", "crank_pivot", 0)),
 }
 
@@ -46,6 +48,10 @@ def _module(name):
 
 
 def _schema(name):
+    if name == "demo":
+        from jflex._demo_config import DemoConfig
+
+        return DemoConfig
     return getattr(_module(name), EXPERIMENTS[name][0])
 
 
@@ -77,7 +83,8 @@ CASES = [(name, cfg) for name, (_, cfgs, _, _) in EXPERIMENTS.items() for cfg in
 @pytest.mark.parametrize("name,config", CASES)
 def test_shipped_config_validates_to_what_the_script_reads(name, config):
     raw = jflex.load_yaml(ROOT / "configs" / config)
-    got = validate(_schema(name), copy.deepcopy(raw), config).model_dump()
+    # `jflex demo` drops unset optional keys (run_demo tests `"links" in cfg`); experiment_cli keeps them
+    got = validate(_schema(name), copy.deepcopy(raw), config).model_dump(exclude_none=name == "demo")
     _read_the_same(got, raw)
 
 
@@ -117,3 +124,16 @@ def test_exponent_without_sign_is_a_number(tmp_path):
     f = tmp_path / "c.yaml"
     f.write_text("a: 1.9e11\nb: -2E-3\nc: .5e2\nd: [1e5, 7]\ne: .e5\nf: 1e\n")
     assert jflex.load_yaml(f) == {"a": 1.9e11, "b": -2e-3, "c": 50.0, "d": [1e5, 7], "e": ".e5", "f": "1e"}
+
+
+def test_demo_refuses_a_bad_config_before_running(tmp_path, capsys):
+    from jflex.cli import main
+
+    cfg = jflex.load_yaml(ROOT / "configs" / "demo.yaml")
+    cfg["grid"]["n"] = "61"
+    bad = tmp_path / "demo.yaml"
+    bad.write_text(__import__("yaml").safe_dump(cfg))
+    assert main(["demo", str(bad), "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "field 'grid.n'" in err, err
+    assert not (tmp_path / "run").exists()
