@@ -14,7 +14,8 @@ from ._frf import (
     synthesize_frf as synthesize_frf,
 )
 from ._frf_sweep import frf_sweep as frf_sweep
-from ._mac import best_permutation as best_permutation, mac as mac, serpentine as serpentine, track_modes as track_modes
+from ._mac import (best_permutation as best_permutation, mac as mac, pair_modes as pair_modes, serpentine as serpentine,
+                   track_modes as track_modes)
 from ._lobes import (
     Lobes as Lobes,
     directional_matrix as directional_matrix,
