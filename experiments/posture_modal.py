@@ -69,7 +69,7 @@ class PostureModalConfig(_Strict):
     milling: str = Field(description="milling parameters (Table 4.7), relative to configs/")
     hold: str | list[str] = Field("actuated", description="coordinates held (jflex.modal_analysis)")
     tool_frame: str = "tool"
-    tracking_steps: Count = 40
+    tracking_steps: Count | None = Field(None, description="unused (rows are paired by shape with configuration 1); kept so older configs validate")
     map: MapConfig
     frf: FrfConfig
     lobes: LobesConfig
@@ -79,40 +79,28 @@ class PostureModalConfig(_Strict):
 Seed003Robot = jflex.Seed003Robot
 
 
-def fit_common_ratio(rob: Seed003Robot, posture: int, bounds, hold, n_grid: int = 601) -> tuple[float, float]:
-    return rob.fit_common_ratio(posture, bounds, hold, n_grid)
-
-
-def modal_table(rob: Seed003Robot, model, hold, frame, steps):
+def modal_table(rob: Seed003Robot, model, hold, frame):
     """Modes at the thesis postures, ordered like the thesis rows: configuration 1 sorted by
-    frequency (as in Tables 4.5/4.6), the others by MAC continuity along a straight joint-space
-    path from configuration 1 (one compiled sweep for all postures and paths)."""
+    frequency (as in Tables 4.5/4.6), the others paired with configuration 1's mode shapes
+    (:func:`jflex.linear.pair_modes`: MAC first, frequency as the tie-break), as the tables label
+    rows by shape (one compiled batch for all postures)."""
     th = rob.thesis
-    s = np.linspace(0, 1, steps)[:, None]
-    paths = [(1 - s) * rob.postures[0] + s * q for q in rob.postures[1:]]
-    allq = np.concatenate([rob.postures] + paths)
-    modes = jflex.sweep(lambda q: jflex.modal_analysis(model, q, hold=hold, frame=frame), allq, progress=False)
-    n_c = len(rob.postures)
-    rows = {"mac_tracked": [], "matched_to_thesis_rows": []}
+    order, mac_c1, modes = rob.row_order(model, hold, frame)
+    f_all, z_all = np.asarray(modes.frequency), np.asarray(modes.damping_ratio)
+    rows = {"paired_by_shape": [], "matched_to_thesis_rows": []}
     tool_shapes = []
-    for k in range(n_c):
-        if k == 0:
-            perm, cont = np.arange(3), 1.0
-        else:
-            a = n_c + (k - 1) * steps
-            p, c = jflex.track_modes(modes.shape[a : a + steps])
-            perm, cont = np.asarray(p[-1]), float(np.min(c))
-        # the thesis labels rows by measured mode shapes, which are not available here: the
-        # second assignment pairs rows and modes by closeness of (f, zeta) to its Model column
+    for k in range(len(rob.postures)):
+        perm, macs = order[k], mac_c1[k]
+        # a cross-check that reads the answer: rows paired by closeness of (f, zeta) to the
+        # thesis' Model column
         fm_all, zm_all = th["frequency_model_Hz"][k], th["damping_model_pct"][k]
         cands = [np.array(pp) for pp in itertools.permutations(range(3))]
-        cost = [np.sum(np.abs(modes.frequency[k][pp] - fm_all) / fm_all
-                       + np.abs(100 * modes.damping_ratio[k][pp] - zm_all) / zm_all) for pp in cands]
+        cost = [np.sum(np.abs(f_all[k][pp] - fm_all) / fm_all + np.abs(100 * z_all[k][pp] - zm_all) / zm_all) for pp in cands]
         matched = cands[int(np.argmin(cost))]
-        tool_shapes.append(modes.tool_shape[k][:, perm])
-        for key, pm in (("mac_tracked", perm), ("matched_to_thesis_rows", matched)):
-            f = modes.frequency[k][pm]
-            z = 100 * modes.damping_ratio[k][pm]
+        tool_shapes.append(np.asarray(modes.tool_shape[k])[:, perm])
+        for key, pm in (("paired_by_shape", perm), ("matched_to_thesis_rows", matched)):
+            f = f_all[k][pm]
+            z = 100 * z_all[k][pm]
             for i in range(3):
                 fm, fx = fm_all[i], th["frequency_exp_Hz"][k, i]
                 rows[key].append(
@@ -122,7 +110,7 @@ def modal_table(rob: Seed003Robot, model, hold, frame, steps):
                         damping_jflex_pct=z[i], damping_thesis_model_pct=zm_all[i],
                         damping_exp_pct=th["damping_exp_pct"][k, i],
                         error_to_model_pct=100 * (f[i] - fm) / fm, error_to_exp_pct=100 * (f[i] - fx) / fx,
-                        tracking_min_mac=cont,
+                        mac_to_configuration1=float(macs[i]),
                     )
                 )
     return rows, tool_shapes
@@ -165,6 +153,12 @@ def frequency_map(rob, model, q1, n2, n3, hold, chunk, out_dir):
     return q2, q3, f_s, f_t, float(np.min(cont))
 
 
+def _caption(fig, rob, what: str):
+    """The source, cited once per figure, below it."""
+    fig.text(0.5, 0.0, f"{what}. Model: jflex, {rob.cfg['source']}; reflected rotor inertias {rob.cfg['gear_ratios'].get('provenance', 'as configured')}.",
+             ha="center", va="top", fontsize=8, wrap=True)
+
+
 def plot_maps(path, rob, q2, q3, f_sorted, f_tracked):
     fig, axes = plt.subplots(2, 3, figsize=(14, 8), constrained_layout=True)
     for row, (F, lab) in enumerate([(f_sorted, "sorted"), (f_tracked, "MAC-tracked")]):
@@ -172,11 +166,14 @@ def plot_maps(path, rob, q2, q3, f_sorted, f_tracked):
             ax = axes[row, i]
             cs = ax.contourf(np.degrees(q3), np.degrees(q2), F[:, :, i], levels=20, cmap="viridis")
             fig.colorbar(cs, ax=ax, label="f [Hz]")
-            ax.plot(np.degrees(rob.postures[:, 2]), np.degrees(rob.postures[:, 1]), "r^", label="EMA postures")
-            ax.set_title(f"{rob.name}: mode {i + 1} ({lab})")
+            ax.plot(np.degrees(rob.postures[:, 2]), np.degrees(rob.postures[:, 1]), "r^")
+            for k, qk in enumerate(np.degrees(rob.postures)):
+                ax.annotate(f"config. {k + 1}", (qk[2], qk[1]), color="r", fontsize=7, xytext=(3, 3), textcoords="offset points")
+            ax.set_title(f"{rob.name}: mode {i + 1} ({lab}), q1 = {np.degrees(rob.postures[0, 0]):.0f} deg")
             ax.set_xlabel("q3 [deg]")
             ax.set_ylabel("q2 [deg]")
-    fig.savefig(path, dpi=110)
+    _caption(fig, rob, f"{rob.name}: first three natural frequencies over (q2, q3), motors held; triangles: the EMA configurations 1-3")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 
@@ -190,7 +187,8 @@ def plot_frfs(path, rob, omega, frfs):
         axes[i].set_ylabel("receptance [m/N]")
         axes[i].grid(True, which="both", alpha=0.3)
     axes[0].legend()
-    fig.savefig(path, dpi=110)
+    _caption(fig, rob, f"{rob.name}: predicted tool receptance at the EMA configurations 1-3, motors held")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 
@@ -205,17 +203,12 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     for rel in cfg["robots"]:
         path = cfg_root / rel
         rob = Seed003Robot(jflex.load_yaml(path), path.parent)
-        gr = rob.cfg.get("gear_ratios", {"mode": "fit_common"})
-        if gr.get("mode") == "fit_common":
-            r, err = fit_common_ratio(rob, int(gr.get("posture", 0)), gr.get("bounds", [20, 600]), hold)
-            ratios, how = np.full(3, r), f"one common ratio fitted to the thesis Model frequencies of configuration {int(gr.get('posture', 0)) + 1} (rms {100 * err:.3f} %)"
-        else:
-            ratios, how = np.asarray(gr["values"], dtype=float), "given in the config"
-        model = rob.model(ratios)
+        model, how = rob.configured_model()
+        ratios = np.asarray(model.effects[0].gear_ratio)
         models[rob.name], robs[rob.name] = model, rob
-        print(f"{rob.name}: gear ratios {np.round(ratios, 1).tolist()} ({how})")
+        print(f"{rob.name}: {how}")
 
-        rows, tool_shapes = modal_table(rob, model, hold, frame, int(cfg.get("tracking_steps", 40)))
+        rows, tool_shapes = modal_table(rob, model, hold, frame)
         summary = {key: summarise(v) for key, v in rows.items()}
         for key, sm in summary.items():
             print(f"{rob.name} [{key}]: " + ", ".join(f"{k} = {v:.2f}" for k, v in sm.items()))
@@ -237,6 +230,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         results["robots"][rob.name] = {
             "gear_ratios": ratios.tolist(),
             "gear_ratio_choice": how,
+            "reflected_rotor_inertia_kg_m2": (ratios**2 * np.asarray(model.effects[0].rotor_inertia)).tolist(),
             "rotor_inertia_kg_m2": np.asarray(model.effects[0].rotor_inertia).tolist(),
             "base_parameter_realisation_rel_error": float(np.max(rob.realisation_error)),
             "modal_table": rows,
@@ -279,10 +273,12 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         })
     ax.set_xlabel("spindle speed [rpm]")
     ax.set_ylabel("axial depth limit [mm]")
-    ax.set_title("ZOA stability lobes from the predicted tool FRF (Table 4.7 milling parameters)")
+    ax.set_title(f"{rob.name}: ZOA stability lobes from the predicted tool FRF")
     ax.grid(True, alpha=0.3)
     ax.legend()
-    fig.savefig(run_dir / "stability_lobes.png", dpi=110)
+    _caption(fig, rob, f"{rob.name}: stability limits at configurations {', '.join(str(k + 1) for k in lb['postures'])}; "
+             f"milling parameters seed 003 Table 4.7")
+    fig.savefig(run_dir / "stability_lobes.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     results["stability_lobes"] = {"robot": lb["robot"], "postures": lobes_out}
     return results

@@ -223,3 +223,18 @@ class Seed003Robot:
         sol = so.least_squares(res, np.log(np.asarray(start, dtype=float)), x_scale=1.0, xtol=1e-12, ftol=1e-12)
         J = np.exp(np.r_[sol.x, sol.x[1]])
         return J, res(sol.x)
+
+    def row_order(self, model, hold="actuated", frame=None):
+        """The model modes in the thesis tables' row order at each EMA posture: configuration 1
+        by frequency, the others paired with configuration 1's shapes
+        (:func:`jflex.linear.pair_modes`, MAC first, frequency as tie-break), as Tables 4.5/4.6
+        label rows by mode shape. Returns (index (P, 3) int, MAC with configuration 1 (P, 3),
+        the :class:`jflex.linear.Modes` of all postures, batched)."""
+        import jax
+
+        from .linear import modal_analysis, pair_modes
+
+        modes = jax.vmap(lambda q: modal_analysis(model, q, hold=hold, frame=frame))(self.postures)
+        f, S = np.asarray(modes.frequency), np.asarray(modes.shape)
+        pairs = [pair_modes(S[0][:, :3], S[k], f[0][:3], f[k]) for k in range(len(self.postures))]
+        return np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs]), modes
