@@ -14,8 +14,6 @@ import json
 import math
 import os
 import pathlib
-import sys
-import time
 import zipfile
 from collections.abc import Callable
 
@@ -28,6 +26,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ._allocator import tune_allocator
 from ._errors import DataError, ShapeError
 from ._fingerprint import fingerprint
+from ._progress import bar
 
 _MANIFEST = "sweep.json"
 _CHANGED = {
@@ -42,17 +41,6 @@ def _tune_allocator_once():
     # jflex/_allocator.py); JFLEX_TUNE_ALLOCATOR=0 leaves glibc's defaults
     if os.environ.get("JFLEX_TUNE_ALLOCATOR", "1") != "0":
         tune_allocator()
-
-
-def _progress(done, total, t0, label):
-    frac = done / total
-    el = time.perf_counter() - t0
-    eta = el / frac - el if frac > 0 else float("nan")
-    bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
-    sys.stderr.write(f"\r{label} [{bar}] {done}/{total} ({el:.1f}s, eta {eta:.1f}s)")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
 
 
 def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True):
@@ -100,7 +88,7 @@ def sweep(
       them as a non-batched argument via ``functools.partial`` or a closure.
     - ``args``: pytrees of arrays sharing a leading batch axis of size N.
     - ``chunk_size``: items per compiled call (memory is bounded by one chunk).
-    - ``progress``: print a progress bar to stderr.
+    - ``progress``: a progress bar on stderr (tqdm; drawn only when stderr is a terminal).
     - ``on_chunk``: ``on_chunk(start, stop, outputs)`` called with host (NumPy) outputs of each
       finished chunk.
     - ``out_dir``: if given, each finished chunk is saved as ``out_dir/chunk_<start>.npz`` at
@@ -144,34 +132,33 @@ def sweep(
         _check_manifest(out_path, identity)
     treedef = None
     pieces = []
-    t0 = time.perf_counter()
-    for start in range(0, N, chunk):
-        stop = min(start + chunk, N)
-        cached = out_path / f"chunk_{start:09d}.npz" if out_path is not None else None
-        if cached is not None and cached.exists():
-            flat = _load_chunk(cached, _chunk_fingerprint(identity, start, stop), out_path)
-            if treedef is None:
-                treedef = jax.tree_util.tree_structure(jax.eval_shape(jax.vmap(fn), *jax.tree_util.tree_map(lambda a: a[:1], args)))
-            host = jax.tree_util.tree_unflatten(treedef, flat)
-        else:
-            pad = chunk - (stop - start)
+    with bar(N, label, progress) as shown_bar:
+        for start in range(0, N, chunk):
+            stop = min(start + chunk, N)
+            cached = out_path / f"chunk_{start:09d}.npz" if out_path is not None else None
+            if cached is not None and cached.exists():
+                flat = _load_chunk(cached, _chunk_fingerprint(identity, start, stop), out_path)
+                if treedef is None:
+                    treedef = jax.tree_util.tree_structure(jax.eval_shape(jax.vmap(fn), *jax.tree_util.tree_map(lambda a: a[:1], args)))
+                host = jax.tree_util.tree_unflatten(treedef, flat)
+            else:
+                pad = chunk - (stop - start)
 
-            def take(a):
-                a = jnp.asarray(a[start:stop])
-                if pad:  # repeat the last item so every chunk has one compiled shape
-                    a = jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)])
-                return jax.device_put(a, sharding)
+                def take(a):
+                    a = jnp.asarray(a[start:stop])
+                    if pad:  # repeat the last item so every chunk has one compiled shape
+                        a = jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)])
+                    return jax.device_put(a, sharding)
 
-            out = vfn(*jax.tree_util.tree_map(take, args))
-            host = jax.tree_util.tree_map(lambda a: np.asarray(a)[: stop - start], out)
-            flat, treedef = jax.tree_util.tree_flatten(host)
-            if cached is not None:
-                _save_chunk(cached, flat, _chunk_fingerprint(identity, start, stop))
-        if on_chunk is not None:
-            on_chunk(start, stop, host)
-        pieces.append(host)
-        if progress:
-            _progress(stop, N, t0, label)
+                out = vfn(*jax.tree_util.tree_map(take, args))
+                host = jax.tree_util.tree_map(lambda a: np.asarray(a)[: stop - start], out)
+                flat, treedef = jax.tree_util.tree_flatten(host)
+                if cached is not None:
+                    _save_chunk(cached, flat, _chunk_fingerprint(identity, start, stop))
+            if on_chunk is not None:
+                on_chunk(start, stop, host)
+            pieces.append(host)
+            shown_bar.update(stop - start)
     return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=0), *pieces)
 
 

@@ -10,18 +10,24 @@ from .._runs import make_run_dir
 
 
 def _diagnose(args) -> int:
+    from .._progress import stages
     from ._case import load_case
     from ._diagnose import diagnose
     from ._report import write_report
 
+    # the stages on stderr while a person watches (a terminal); nothing in a log. The stage line
+    # is closed before an error is printed, so the two never share a line
     try:
-        case = load_case(args.case, allow_outside=args.allow_outside)
-        run_dir = make_run_dir("diagnose", args.out)
-        diag = diagnose(case, max_effects=args.max_effects, progress=lambda s: print(s, flush=True))
+        with stages("diagnose") as say:
+            say("reading the case")
+            case = load_case(args.case, allow_outside=args.allow_outside)
+            run_dir = make_run_dir("diagnose", args.out)
+            diag = diagnose(case, max_effects=args.max_effects, progress=say)
+            say("writing the report (report.md, report.html, plots)")
+            path = write_report(diag, run_dir)
     except JFlexError as exc:
         print(f"jflex diagnose: {exc}", file=sys.stderr)
         return 2
-    path = write_report(diag, run_dir)
     r = diag.result
     print(f"gap {r['gap_before']:.2f} % -> {r['gap_after']:.2f} % (noise floor {r['noise_floor']:.2f} %); "
           f"selected: {[s['effect'] + ('@' + s['joint'] if s['joint'] else '') for s in r['selected']] or 'nothing'}")
@@ -63,7 +69,7 @@ def _bench(args) -> int:
     run_bench = _bench_module().run_bench
 
     run_dir = make_run_dir("gap-bench", args.out)
-    s = run_bench(run_dir, size=args.size, limit=args.limit, progress=lambda m: print(m, flush=True))
+    s = run_bench(run_dir, size=args.size, limit=args.limit, progress=True)
     print(f"top-1 {s['top1']:.0%}, top-2 {s['top2']:.0%}, median shrink {s['median_shrink']:.0f} %, "
           f"false alarms {s['false_alarm_rate'] if s['false_alarm_rate'] is None else format(s['false_alarm_rate'], '.0%')}; "
           f"table: {run_dir / 'bench.md'}")

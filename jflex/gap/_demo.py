@@ -6,15 +6,19 @@ from __future__ import annotations
 
 import pathlib
 
+from .._progress import stages
 from ._diagnose import diagnose
 from ._report import write_report
 
 DATA = pathlib.Path(__file__).resolve().parents[1] / "data"
 
 
-def demo(out_dir, *, progress=print) -> pathlib.Path:
+def demo(out_dir, *, progress=True) -> pathlib.Path:
     """Copy the built-in case to ``out_dir/case``, diagnose it, write the report into ``out_dir``;
     the hidden truth is written to ``out_dir/truth.json`` only after the diagnosis.
+
+    ``progress``: ``True`` shows the stage on stderr (when it is a terminal), ``False`` nothing,
+    a ``callable(str)`` receives the stage lines.
 
     **Returns:** the path of ``report.md``.
     """
@@ -24,11 +28,14 @@ def demo(out_dir, *, progress=print) -> pathlib.Path:
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     folder = out / "case"
-    if folder.exists():
-        shutil.rmtree(folder)
-    shutil.copytree(DATA / "demo_case", folder)
-    diag = diagnose(folder, progress=progress)
-    path = write_report(diag, out)
+    with stages("demo", progress) as say:
+        say("copying the built-in case")
+        if folder.exists():
+            shutil.rmtree(folder)
+        shutil.copytree(DATA / "demo_case", folder)
+        diag = diagnose(folder, progress=say)
+        say("writing the report (report.md, report.html, plots)")
+        path = write_report(diag, out)
     truth = json.loads((DATA / "demo_truth.json").read_text())
     (out / "truth.json").write_text(json.dumps(truth, indent=2))
     with path.open("a") as f:

@@ -8,7 +8,6 @@ Gauss-Newton covariance and the singular values of the residual Jacobian.
 from __future__ import annotations
 
 import dataclasses
-import sys
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -20,6 +19,7 @@ import numpy as np
 import optimistix as optx
 
 from .._errors import ParameterError, ShapeError
+from .._progress import bar, note
 
 
 # --- transforms: unconstrained u -> physical p ------------------------------------------------
@@ -471,12 +471,13 @@ class _Run:
     interrupted: bool
 
 
-def _loop(step, state, u0, cost0, keep0, max_steps, every, callback, spec, t_start, tag="", stall=None):
+def _loop(step, state, u0, cost0, keep0, max_steps, every, callback, spec, tag="", stall=None):
     """The step loop of every solver path: ``step(u, state) -> (u, state, done, result, cost,
     keep)``; ``keep`` (the Gauss-Newton path's residual and Jacobian at an accepted point, else
     ``None``) is stored with the best point. Ctrl-C ends it with the best point kept."""
     best = _Run(u0, cost0, keep0, [cost0], 0, "max_steps reached", False)
     u, flat = u0, 0
+    shown_bar = bar(max_steps, f"fit{tag}", bool(every), unit="step")
     try:
         for k in range(1, max_steps + 1):
             best.steps = k
@@ -488,8 +489,9 @@ def _loop(step, state, u0, cost0, keep0, max_steps, every, callback, spec, t_sta
                 best.u, best.cost, best.keep = u, cost, keep
             if stall is not None and flat >= stall and not bool(done):
                 done, res = True, None
+            shown_bar.update(1)
             if every and (k % every == 0 or bool(done)):
-                print(f"  fit{tag} step {k:4d}  cost {cost:.6e}  best {best.cost:.6e}  {time.perf_counter() - t_start:.1f} s", file=sys.stderr)
+                shown_bar.set_postfix_str(f"cost {cost:.6e}, best {best.cost:.6e}")
             if callback is not None:
                 callback(k, best.cost, spec.values(best.u))
             if bool(done):
@@ -498,6 +500,8 @@ def _loop(step, state, u0, cost0, keep0, max_steps, every, callback, spec, t_sta
                 break
     except KeyboardInterrupt:
         best.interrupted, best.message = True, "interrupted"
+    finally:
+        shown_bar.close()
     return best
 
 
@@ -525,8 +529,9 @@ def fit(
       atol=1e-8)``; for time records :func:`levenberg_marquardt` converges in far fewer
       iterations from a distant start) or minimiser (``optx.BFGS``; the cost is then ``0.5 |r|^2``). Jacobians are
       exact (forward/reverse-mode AD), never finite differences.
-    - ``max_steps`` (per local solve); ``progress``: print every step (or every ``progress``
-      steps) to stderr; ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
+    - ``max_steps`` (per local solve); ``progress``: a tqdm bar of the steps on stderr with the
+      cost (refreshed every ``progress`` steps when an int; drawn only when stderr is a terminal;
+      ``False``: none); ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
     - ``multistart``: ``None`` (default: one local solve from ``model``), a :class:`MultiStart`,
       or an int ``n`` (``MultiStart(n)``): sampled starts ranked by cost in one vmapped
       evaluation, local solves from the best few, the lowest final cost returned. For costs with
@@ -646,16 +651,15 @@ def fit(
         starts = [U[i] for i in order]
         ms_report = [{"candidate": i, "start": {k: np.asarray(v).tolist() for k, v in spec.values(U[i]).items()},
                       "start_cost": float(costs[i])} for i in order]
-        if every:
-            print(f"  multistart: {U.shape[0]} candidates in {timing['multistart_s']:.1f} s, local fits from costs "
-                  + ", ".join(f"{costs[i]:.3e}" for i in order), file=sys.stderr)
+        note(f"fit multistart: {U.shape[0]} candidates in {timing['multistart_s']:.1f} s, local fits from costs "
+             + ", ".join(f"{costs[i]:.3e}" for i in order), bool(every))
 
     best = None
     for i, us in enumerate(starts):
         cost0, keep0, state = start(us)
         if not np.isfinite(cost0):
             raise ParameterError("fit: the residual is not finite at the start parameters; check the start model and the data")
-        run = _loop(step, state, us, cost0, keep0, max_steps, every, callback, spec, t_start, f" [start {i}]" if ms is not None else "",
+        run = _loop(step, state, us, cost0, keep0, max_steps, every, callback, spec, f" [start {i}]" if ms is not None else "",
                     None if stall is None else int(stall))
         if ms_report:
             ms_report[i].update(cost=run.cost, steps=run.steps, result=run.message,

@@ -14,7 +14,6 @@ block by block.
 from __future__ import annotations
 
 import functools
-import time
 from collections.abc import Callable
 
 import equinox as eqx
@@ -24,7 +23,8 @@ import numpy as np
 
 from .._errors import ShapeError
 from .._model import Model
-from .._sweep import _progress, _tune_allocator_once
+from .._progress import bar
+from .._sweep import _tune_allocator_once
 from ._common import check_frequencies
 from ._frf import _check_kind_method, frf, pole_residue, synthesize_frf
 
@@ -86,7 +86,7 @@ def frf_sweep(
     - ``consume``: ``consume(start, H)`` receives each finished block, ``H`` (b, nf, p, p) a
       NumPy array for postures ``start:start + b``, valid during the call only (copy what you
       keep). Without it the result is returned whole.
-    - ``progress``: a progress bar on stderr.
+    - ``progress``: a progress bar on stderr (tqdm; drawn only when stderr is a terminal).
 
     **Returns:** complex (N, nf, p, p) NumPy array, or None when ``consume`` is given.
     Calls :func:`jflex.tune_allocator` first (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
@@ -125,20 +125,19 @@ def frf_sweep(
             out = np.empty((N,) + H.shape[1:], H.dtype)
         out[b0:b1] = H
 
-    t0 = time.perf_counter()
     pending = None
-    for c0 in range(0, N, chunk):
-        c1 = min(c0 + chunk, N)
-        items = stage1(_padded(Q[c0:c1], chunk))
-        for b0 in range(c0, c1, block):
-            # dispatch the next block before waiting for the last (JAX dispatches asynchronously):
-            # the Python side of a call overlaps the previous block's computation
-            H = stage2(items, np.int32(b0 - c0))
-            if pending is not None:
-                finish(*pending)
-            pending = (b0, min(b0 + block, c1), H)
-        if progress:
-            _progress(c1, N, t0, label)
+    with bar(N, label, progress, unit="posture") as shown_bar:
+        for c0 in range(0, N, chunk):
+            c1 = min(c0 + chunk, N)
+            items = stage1(_padded(Q[c0:c1], chunk))
+            for b0 in range(c0, c1, block):
+                # dispatch the next block before waiting for the last (JAX dispatches asynchronously):
+                # the Python side of a call overlaps the previous block's computation
+                H = stage2(items, np.int32(b0 - c0))
+                if pending is not None:
+                    finish(*pending)
+                pending = (b0, min(b0 + block, c1), H)
+            shown_bar.update(c1 - c0)
     finish(*pending)
     return out
 

@@ -10,10 +10,12 @@ from __future__ import annotations
 import json
 import pathlib
 import shutil
+import sys
 import time
 
 import numpy as np
 
+from jflex._progress import bar, shown
 from jflex._runs import write_results
 from jflex.gap import diagnose
 
@@ -184,41 +186,51 @@ def markdown(summary: dict, rows: list[dict]) -> str:
     return "\n".join(L) + "\n"
 
 
-def runnable(specs: list[dict], progress=print) -> list[dict]:
+def runnable(specs: list[dict], progress=True) -> list[dict]:
     """``specs`` without the MuJoCo family when ``mujoco`` is not installed (said in one line)."""
     try:
         import mujoco  # noqa: F401  (the optional 'peers' extra)
     except ImportError:
         n = sum(c["family"] == "mujoco" for c in specs)
         if n:
-            progress(f"MuJoCo family skipped ({n} cases): mujoco is not installed (pip install -e '.[peers]')")
+            msg = f"MuJoCo family skipped ({n} cases): mujoco is not installed (pip install -e '.[peers]')"
+            (progress if callable(progress) else lambda m: print(m, file=sys.stderr))(msg)
         return [c for c in specs if c["family"] != "mujoco"]
     return specs
 
 
-def run_bench(out_dir, size: str = "full", limit: int | None = None, progress=print) -> dict:
-    """Generate, diagnose (truths withheld) and score the bench; resumable."""
+def run_bench(out_dir, size: str = "full", limit: int | None = None, progress=True) -> dict:
+    """Generate, diagnose (truths withheld) and score the bench; resumable.
+
+    ``progress``: ``True`` draws a bar over the cases on stderr (when it is a terminal) with the
+    case and its diagnosis stage, each finished case's line left above it; a ``callable(str)``
+    receives those lines instead; ``False`` shows nothing."""
     root = pathlib.Path(out_dir)
     (root / "results").mkdir(parents=True, exist_ok=True)
     specs = runnable(plan(size)[:limit] if limit else plan(size), progress)
     rows = []
-    for i, spec in enumerate(specs):
-        res_path = root / "results" / f"{spec['id']}.json"
-        if not res_path.is_file():
-            t0 = time.perf_counter()
-            folder = make_case(spec, root)
-            t1 = time.perf_counter()
-            diag = diagnose(folder)
-            res = diag.result
-            res["generate_seconds"] = t1 - t0
-            write_results(root / "results", res, res_path.name)
-        res = json.loads(res_path.read_text())
-        truth = json.loads((root / "truths" / f"{spec['id']}.json").read_text())  # read only now, after the diagnosis
-        row = score_case(res, truth)
-        row["id"], row["family"] = spec["id"], spec["family"]
-        rows.append(row)
-        progress(f"[{i + 1}/{len(specs)}] {spec['id']}: selected {row['selected'] or '-'} "
+    with bar(len(specs), "gap-bench", bool(progress) and not callable(progress), unit="case") as cases:
+        line = progress if callable(progress) else (cases.write if shown(progress) else (lambda m: None))
+        for i, spec in enumerate(specs):
+            res_path = root / "results" / f"{spec['id']}.json"
+            cases.set_description_str(f"gap-bench {spec['id']}")
+            if not res_path.is_file():
+                t0 = time.perf_counter()
+                cases.set_postfix_str("generating")
+                folder = make_case(spec, root)
+                t1 = time.perf_counter()
+                diag = diagnose(folder, progress=lambda s: cases.set_postfix_str(s.strip()[:60]))
+                res = diag.result
+                res["generate_seconds"] = t1 - t0
+                write_results(root / "results", res, res_path.name)
+            res = json.loads(res_path.read_text())
+            truth = json.loads((root / "truths" / f"{spec['id']}.json").read_text())  # read only now, after the diagnosis
+            row = score_case(res, truth)
+            row["id"], row["family"] = spec["id"], spec["family"]
+            rows.append(row)
+            line(f"[{i + 1}/{len(specs)}] {spec['id']}: selected {row['selected'] or '-'} "
                  f"(truth {row['truth'] or 'null'}), shrink {row['shrink']:.0f} %, {row['seconds']:.1f} s")
+            cases.update(1)
     summary = summarise(rows)
     write_results(root, dict(summary=summary, cases=rows), "bench.json")
     (root / "bench.md").write_text(markdown(summary, rows))
