@@ -87,15 +87,27 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     sig = signatures(pb, nom, cands)
     tc = sorted([c for c in cands if c in sig], key=lambda c: -sig[c])
     keep = tc[:prune] + [c for c in cands if c not in sig]
+    failed = _failed_solves("nominal", ev0)
+
+    def first_round(base):
+        out = {}
+        for c in keep:
+            st = pb.add(base, c)
+            ev = pb.evaluate(st)
+            failed.extend(_failed_solves(c.label(pb.names), ev))
+            out[c] = (st, ev)
+        return out
+
+    fitted = None
+    if pb.refit_nominal is not None:
+        nom, ev0, floor, floor_source, fitted = _choose_base(pb, case, nom, ev0, floor, floor_source, first_round)
+        if fitted is not None and not fitted:
+            keep = []
     say(f"gap {gap_summary(ev0, floor)[0]:.2f} % (noise floor {gap_summary(ev0, floor)[1]:.2f} %), "
         f"{len(cands)} candidates, {len(keep)} refitted")
-    ranking, fitted = [], {}
-    failed = _failed_solves("nominal", ev0)
-    for c in keep:
-        st = pb.add(nom, c)
-        ev = pb.evaluate(st)
-        failed += _failed_solves(c.label(pb.names), ev)
-        fitted[c] = (st, ev)
+    ranking = []
+    if fitted is None:
+        fitted = first_round(nom)
     # a model fitted on the training data reaches a held-out gap no lower than the noise (in
     # expectation): the best candidate's gap bounds a floor estimated from one record, which a sharp
     # unmodelled effect's harmonics can raise above it
@@ -158,12 +170,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     shrink_total = float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0
     verdict_ = verdict(significant, is_significant(ev_cur, floor), bool(sel.steps), shrink_total)
     wh = where(pb, ev0, floor, case)
-    moves = link_moves(pb.robot, pb.inertia.pi0, nom.tfit.delta, pb.inertia) if pb.inertia is not None else []
-    inertia_note = ("not refitted (no torque training data, or the case holds it: options.refit_inertia)"
-                    if pb.inertia_gain is None else
-                    f"refitted (training information gain {pb.inertia_gain:.0f} over the base parameters' cost)"
-                    if pb.inertia is not None else
-                    f"CAD kept: a refit does not pay for its base parameters on the training data (gain {pb.inertia_gain:.0f})")
+    moves, inertia_note = _inertia_report(pb, nom)
     result = dict(
         case=str(case.path), verdict=verdict_, stop_reason=stop_reason(sel, pb.names),
         gap_before=gap0, gap_after=gap_after, noise_floor=fl,
@@ -182,6 +189,63 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         units={"gap": "NRMSE %", "noise_floor": "NRMSE %", "shrink": "% of the excess over noise closed"},
     )
     return Diagnosis(result, pb, nom, state, steps)
+
+
+def _choose_base(pb: Problem, case, nom, ev0, floor, floor_source, first_round):
+    """The nominal model the candidates build on, when the frequency data offered a refit of the CAD
+    inertias (:meth:`Problem._refit_linear_inertia`): the refit and a candidate effect on CAD both
+    change the model, so they are judged alike, on held-out data. Refitted, the nominal model within
+    noise is the diagnosis (nothing left to explain). Else the candidates are refitted on CAD first:
+    when one of them predicts the held-out data better than the refit does, the gap is that effect
+    (the refit had bent the inertias around it) and CAD stays; else the refit is the nominal model
+    and the candidates are refitted on it. Returns ``(nominal, ev0, floor, floor_source, fitted)``;
+    ``fitted`` is None when the candidates are still to be refitted, ``{}`` when none are."""
+    li = pb.lin_inertia
+    alt = pb.refit_nominal
+    ev_alt = pb.evaluate(alt)
+    src_alt = {}
+    floor_alt = noise_floor(pb, ev_alt, case, src_alt)
+
+    def freq_gap(ev):
+        v = [e["nrmse"] ** 2 for e in ev.values() if e["kind"] in ("frf", "modal")]
+        return float(np.sqrt(np.mean(v))) if v else np.inf
+
+    if not is_significant(ev_alt, floor_alt):
+        li.update(used=True, reason="the refitted nominal model is within noise on the held-out data")
+        return alt, ev_alt, floor_alt, src_alt, {}
+    fitted = first_round(nom)
+    best = min(fitted, key=lambda c: freq_gap(fitted[c][1]), default=None)
+    if best is not None and freq_gap(fitted[best][1]) < freq_gap(ev_alt):
+        li.update(used=False, reason=(f"CAD kept: {best.label(pb.names)} on CAD predicts the held-out data better "
+                                      f"({freq_gap(fitted[best][1]):.2f} %) than the inertial refit ({freq_gap(ev_alt):.2f} %)"))
+        return nom, ev0, floor, floor_source, fitted
+    li.update(used=True, reason=(f"no candidate on CAD predicts the held-out data better than the inertial refit "
+                                 f"({freq_gap(ev_alt):.2f} %)"))
+    return alt, ev_alt, floor_alt, src_alt, None
+
+
+def _inertia_report(pb: Problem, nom: State):
+    """How far the nominal identification moved each link from CAD, and on which data."""
+    if pb.inertia is not None:
+        return (link_moves(pb.robot, pb.inertia.pi0, nom.tfit.delta, pb.inertia),
+                f"refitted on the torque data (training information gain {pb.inertia_gain:.0f} over the base parameters' cost)")
+    if pb.inertia_gain is not None:
+        return [], f"CAD kept: a refit does not pay for its base parameters on the training data (gain {pb.inertia_gain:.0f})"
+    if pb.lin_inertia is not None:
+        li = pb.lin_inertia
+        ho = li["held_out"]
+        ho_txt = f"; held-out frequency-side gap {ho[0]:.2f} -> {ho[1]:.2f} %" if ho else ""
+        if li["used"]:
+            return (link_moves(pb.robot, li["prior"].pi0, li["delta"], li["prior"]),
+                    f"refitted on the FRF/modal training data with the nominal springs (training information gain "
+                    f"{li['gain']:.0f} over its parameters' cost{ho_txt}): {li['reason']}")
+        if li["gain"] <= 0:
+            return [], f"CAD kept: a refit on the FRF/modal data does not pay for its parameters (gain {li['gain']:.0f})"
+        if li["offered"]:
+            return [], li["reason"] + ho_txt
+        return [], ("CAD kept: refitted on the FRF/modal training data, the inertias did not close half of the held-out "
+                    f"gap{ho_txt} (a CAD error would; bending them around an effect the model lacks does not)")
+    return [], "not refitted (no training data that identify it, or the case holds it: options.refit_inertia)"
 
 
 UNMATCHED = 0.1  # a measured mode more than 10 % from every model mode is one the model lacks

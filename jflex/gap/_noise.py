@@ -35,7 +35,7 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
     second difference, ``sigma = MAD(d2 r) / sqrt(6)`` (white noise: var(d2) = 6 sigma^2; the
     smooth model error barely enters, and the median ignores the few jumps at reversals).
     FRF: ``H_repeats`` when recorded (likewise), else the same on the real and imaginary parts of the
-    residual along frequency. Modal tables: ``noise.modal_frequency_pct`` of the case (default 1).
+    residual along frequency. Modal tables: :func:`modal_floor`.
     Output-error (tip) sets: ``y_repeats`` when recorded, else per channel the smaller of the
     residual's second-difference estimate and the record's own fourth difference,
     ``MAD(d4 y) / sqrt(70)`` (a nominal simulation that drifts or runs away fast leaves
@@ -89,24 +89,64 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
                              "record fourth difference")
             out[name] = float(np.sqrt(np.mean(sig**2)) * 100)
         elif r["kind"] == "frf":
-            a = d.arrays
-            ok = L.frf_entries(a["H"])
-            scale = L.frf_scale(a["H"])
-            if "H_repeats" in a:
-                rep = a["H_repeats"]
-                # per-entry noise variance of one record (unbiased), summed over frequency and set
-                # against the FRF's energy: the measure of the gap itself
-                var = np.sum(np.abs(rep - rep.mean(axis=0)) ** 2, axis=0) / max(rep.shape[0] - 1, 1)
-                var = var / repeats_factor(rep, a["H"]) ** 2
-                out[name] = float(np.sqrt(np.sum(var[:, ok]) / np.sum(np.abs(a["H"][:, ok]) ** 2)) * 100)
-                src[name] = "H_repeats"
-            else:
-                src[name] = "residual second difference"
-                e = r["err"][:, ok] / scale[ok]
-                d2 = e[2:] - 2 * e[1:-1] + e[:-2]
-                sig = np.sqrt(robust_sigma(d2.real) ** 2 + robust_sigma(d2.imag) ** 2) / np.sqrt(6)
-                out[name] = float(sig * 100)
+            out[name], src[name] = frf_floor(d.arrays, r["err"])
         else:
-            out[name] = float(case.noise.get("modal_frequency_pct", 1.0))
-            src[name] = "noise.modal_frequency_pct" if "modal_frequency_pct" in case.noise else "default 1 %"
+            out[name], src[name] = modal_floor(case, d.arrays.get("zeta"))
     return out
+
+
+def frf_floor(a: dict, err) -> tuple[float, str]:
+    """NRMSE [%] that noise alone leaves on an FRF set with arrays ``a`` and model error ``err``
+    (F, 3, 3), and its source: ``H_repeats`` when recorded, else the residual's second difference
+    along frequency (see :func:`noise_floor`)."""
+    ok = L.frf_entries(a["H"])
+    if "H_repeats" in a:
+        rep = a["H_repeats"]
+        # per-entry noise variance of one record (unbiased), summed over frequency and set
+        # against the FRF's energy: the measure of the gap itself
+        var = np.sum(np.abs(rep - rep.mean(axis=0)) ** 2, axis=0) / max(rep.shape[0] - 1, 1)
+        var = var / repeats_factor(rep, a["H"]) ** 2
+        return float(np.sqrt(np.sum(var[:, ok]) / np.sum(np.abs(a["H"][:, ok]) ** 2)) * 100), "H_repeats"
+    e = err[:, ok] / L.frf_scale(a["H"])[ok]
+    d2 = e[2:] - 2 * e[1:-1] + e[:-2]
+    sig = np.sqrt(robust_sigma(d2.real) ** 2 + robust_sigma(d2.imag) ** 2) / np.sqrt(6)
+    return float(sig * 100), "residual second difference"
+
+
+def fits_to_noise(lm, x, sets, case, factor: float = 3.0, margin: float = 1.0) -> bool:
+    """Whether the linear model ``lm`` at log parameters ``x`` fits every FRF/modal set in ``sets``
+    to within ``factor`` times its noise floor plus ``margin`` [%] (NRMSE as the gap is measured)."""
+    for d in sets:
+        a = d.arrays
+        if d.kind == "frf":
+            Hm = lm.frf(x, a["q0"], a["freq"])
+            err = np.where(np.isfinite(Hm), Hm, 0.0) - a["H"]
+            ok = L.frf_entries(a["H"])
+            gap = np.sqrt(np.sum(np.abs(err[:, ok]) ** 2) / np.sum(np.abs(a["H"][:, ok]) ** 2)) * 100
+            floor = frf_floor(a, err)[0]
+        else:
+            ef, ez, *_ = L.modal_errors(lm, x, a)
+            gap = np.sqrt(np.mean(ef**2) + np.mean((L.DAMPING_WEIGHT * ez) ** 2)) * 100
+            floor = modal_floor(case, a.get("zeta"))[0]
+        if not np.isfinite(gap) or gap > factor * floor + margin:
+            return False
+    return True
+
+
+MODAL_FREQUENCY_PCT = 1.0  # default scatter of identified natural frequencies [%]
+MODAL_DAMPING_PCT = 15.0  # default scatter of identified damping ratios [%]: EMA rarely does better
+
+
+def modal_floor(case: Case, zeta=None) -> tuple[float, str]:
+    """NRMSE [%] that the scatter of identified modes leaves on a modal table, measured as the gap
+    is (:func:`._linear.modal_errors`: the frequency error plus ``DAMPING_WEIGHT`` x the relative
+    damping error): ``sqrt(f^2 + (DAMPING_WEIGHT d)^2)`` with ``f`` = ``noise.modal_frequency_pct``
+    and ``d`` = ``noise.modal_damping_pct`` of the case (defaults 1 % and 15 %); ``d`` only when the
+    table's damping ratios ``zeta`` hold a measured value."""
+    f = float(case.noise.get("modal_frequency_pct", MODAL_FREQUENCY_PCT))
+    d = float(case.noise.get("modal_damping_pct", MODAL_DAMPING_PCT))
+    if zeta is not None and not np.any(np.isfinite(np.asarray(zeta, float))):
+        d = 0.0
+    src = ", ".join(f"noise.{k}" if k in case.noise else f"default {v:g} % ({k})"
+                    for k, v in (("modal_frequency_pct", MODAL_FREQUENCY_PCT), ("modal_damping_pct", MODAL_DAMPING_PCT)))
+    return float(np.hypot(f, L.DAMPING_WEIGHT * d)), src

@@ -12,6 +12,8 @@ import numpy as np
 
 from ._case import Case
 from ._effect_term import EffectCandidate, EffectTerm
+from ._frequency_inertia import refit_linear_inertia, shifted
+from ._noise import fits_to_noise
 from ._inertia import inertia_prior
 from . import _linear as L
 from . import _response as R
@@ -69,6 +71,9 @@ class Problem:
         self.robot = case.robot
         self.lin_robot = self.robot  # the robot of the linear (FRF/modal) models: CAD, or as identified
         self.inertia_gain = None  # training BIC gain of the inertial refit (<= 0: CAD kept)
+        self.lin_inertia = None  # the frequency side's nominal inertial refit (see _refit_linear_inertia)
+        self.refit_nominal = None  # the nominal model with it, when offered
+        self._refit_linear = False
         self.names = tuple(self.robot.joint_names)
         self.n = self.robot.nq
         # responses whose channels hold every model joint enter as equation-error (torque) sets
@@ -163,10 +168,43 @@ class Problem:
             if tfit is not None and tfit.delta is not None:
                 # the torque data identified the inertial parameters: the linear model uses them
                 self.lin_robot = self.robot.replace(inertia=np.asarray(self.robot.inertia) + tfit.delta.reshape(self.n, 10))
+            # else the frequency data refit them, with the nominal springs
+            self._refit_linear = bool(self.options["refit_inertia"]) and self.lin_robot is self.robot
             lm = L.LinearModel(self.lin_robot, structure, self.case.tool_frame)
             if self.ftrain and len(springs):
                 x, _ = L.fit_linear(lm, x, self.ftrain)
+                if self._refit_linear:
+                    self._refit_linear_inertia(tfit, lm, x)
         return State(tfit, lm, x)
+
+    def _refit_linear_inertia(self, tfit, lm, x):
+        """The frequency side's nominal identification when no torque data identified the inertial
+        parameters (:mod:`._frequency_inertia`): the CAD inertias refitted with the nominal springs,
+        offered as :attr:`refit_nominal` when it pays for its parameters on the training data and
+        closes at least ``MIN_NAMED_SHRINK`` % of the held-out frequency-side gap (a CAD error is
+        most of that gap; a refit that bends the inertias around a missing effect predicts a new
+        posture no better, or worse). Without held-out frequency data: when it fits every training
+        set to noise. The diagnosis then judges it against the candidate effects on CAD
+        (:func:`._diagnose.diagnose`)."""
+        from ._selection import MIN_NAMED_SHRINK
+
+        prior = inertia_prior(self.robot, float(self.options["inertia_prior"]))
+        delta, x2, gain = refit_linear_inertia(lm, x, self.ftrain, prior)
+        offered, held_out = False, None
+        if gain > 0:
+            refit = L.LinearModel(self.robot.replace(inertia=np.asarray(self.robot.inertia) + delta.reshape(self.n, 10)),
+                                  lm.structure, self.case.tool_frame)
+            if self.fval:
+                g0, g1 = (np.sqrt(np.mean([v["nrmse"] ** 2 for v in self.evaluate(State(None, m, xm), frequency_only=True).values()]))
+                          for m, xm in ((lm, x), (refit, x2)))
+                held_out = (float(g0), float(g1))
+                offered = g1 <= (1 - MIN_NAMED_SHRINK / 100) * g0
+            else:
+                offered = fits_to_noise(shifted(lm, delta), x2, self.ftrain, self.case)
+            if offered:
+                self.refit_nominal = State(tfit, refit, x2)
+        self.lin_inertia = dict(prior=prior, delta=delta, gain=gain, offered=offered, used=False, held_out=held_out,
+                                reason="")
 
     # --- candidates ----------------------------------------------------------------------------
     def candidates(self) -> list[Candidate]:
@@ -238,7 +276,7 @@ class Problem:
             def fit_alpha(a):
                 sp = list(springs)
                 sp[i] = dataclasses.replace(sp[i], law=law, alpha=round(float(a), 3))
-                lm2 = L.LinearModel(self.lin_robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+                lm2 = L.LinearModel(lm.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
                 lm2._cache = lm._cache  # same geometry and postures: the matrices carry over
                 x2 = np.array(x, float)
                 w = 2 * np.pi * self._ref_freq()
@@ -286,7 +324,7 @@ class Problem:
             return lm2, xf
         if cand.effect == "payload":
             st2 = L.LinearStructure(tuple(springs), True)
-            lm2 = L.LinearModel(self.lin_robot, st2, self.case.tool_frame)
+            lm2 = L.LinearModel(lm.robot, st2, self.case.tool_frame)
             xs = [np.concatenate([ks, cs, [np.log(m)], cpl]) for m in (0.1, 1.0, 10.0)]
             xf, _ = L.fit_linear(lm2, xs[0], self.ftrain, starts=xs[1:])
             return lm2, xf
@@ -298,7 +336,7 @@ class Problem:
         else:
             new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1, coupled=True)]
         sp = springs + new
-        lm2 = L.LinearModel(self.lin_robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+        lm2 = L.LinearModel(lm.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
         # starting stiffnesses: the new spring(s) alone would put a mode at f_t; f_t is scanned over a
         # log grid from below the measured band to well above it (a compliance whose modes lie
         # above the band shows only as a posture-dependent static softening), both springs of a
@@ -431,12 +469,13 @@ class Problem:
         return R.simulation_model(self.robot, state.tfit, self.sim_springs(state), None if self.ttrain else self.rotor_nominal)
 
     # --- evaluation ----------------------------------------------------------------------------
-    def evaluate(self, state: State, sets="validation") -> dict:
-        """Per data set: nrmse [%], per channel [%], mse and effective sample count."""
-        tsets = self.tval if sets == "validation" else self.ttrain
+    def evaluate(self, state: State, sets="validation", frequency_only: bool = False) -> dict:
+        """Per data set: nrmse [%], per channel [%], mse and effective sample count
+        (``frequency_only``: the FRF and modal sets alone)."""
+        tsets = [] if frequency_only else self.tval if sets == "validation" else self.ttrain
         fsets = self.fval if sets == "validation" else self.ftrain
         out = {}
-        if sets == "validation" and self.rval:
+        if sets == "validation" and self.rval and not frequency_only:
             model = self.simulation_model(state)
             for s in self.rval:
                 e, failed = R.residual(model, s)

@@ -106,6 +106,9 @@ class Noise(Strict):
 
     modal_frequency_pct: Annotated[float, Field(ge=0)] | None = Field(
         None, description="noise floor of modal tables [%] (default 1 %)", json_schema_extra={"expects": "number >= 0"})
+    modal_damping_pct: Annotated[float, Field(ge=0)] | None = Field(
+        None, description="relative uncertainty of measured damping ratios [%] (default 15 %)",
+        json_schema_extra={"expects": "number >= 0"})
 
 
 class Options(Strict):
