@@ -18,6 +18,8 @@ which for kappa = 90 deg is Altintas' 2-D directional matrix. With ``mu`` an eig
 
 from __future__ import annotations
 
+import itertools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -64,7 +66,9 @@ def directional_matrix(Kt, Kr, Ka, lead_angle, phi_start, phi_exit, *, n_quad: i
 class Lobes(eqx.Module):
     """Stability lobes: for each lobe number j and eigenvalue branch, one point per chatter
     frequency. ``spindle_speed`` [rpm] and ``depth`` [m] are (n_lobes, nf, m); points with
-    no positive depth are NaN. ``chatter_frequency`` (nf,) [rad/s]."""
+    no positive depth are NaN. ``chatter_frequency`` (nf,) [rad/s]. Along the frequency axis a
+    branch is one continuous eigenvalue of ``[alpha0] G`` (tracked, not in the eigensolver's
+    order), so consecutive points of a branch are neighbours on one lobe curve."""
 
     spindle_speed: jnp.ndarray
     depth: jnp.ndarray
@@ -106,7 +110,7 @@ def stability_lobes(G, omega, *, n_teeth: int, Kt, Kr=0.0, Ka=0.0, lead_angle=np
     Kt, Kr, Ka = coeffs["Kt"], coeffs["Kr"], coeffs["Ka"]
     d = G.shape[1]
     alpha = directional_matrix(Kt, Kr, Ka, lead_angle, phi_start, phi_exit)[:d, :d]
-    mu = jnp.linalg.eigvals(jnp.einsum("ij,fjk->fik", alpha, G))  # (nf, d)
+    mu = _track_branches(jnp.linalg.eigvals(jnp.einsum("ij,fjk->fik", alpha, G)))  # (nf, d)
     small = jnp.abs(mu) < 1e-30
     Lam = -1.0 / jnp.where(small, 1.0, mu)
     LR, LI = Lam.real, Lam.imag
@@ -121,35 +125,63 @@ def stability_lobes(G, omega, *, n_teeth: int, Kt, Kr=0.0, Ka=0.0, lead_angle=np
     return Lobes(jnp.where(ok[None], n, jnp.nan), jnp.broadcast_to(a[None], n.shape), omega)
 
 
+def _track_branches(mu):
+    """``mu`` (nf, d) with each row reordered to follow the previous one (the permutation with the
+    least total distance): the eigensolver returns each frequency's eigenvalues in its own order,
+    and a column that jumped between two eigenvalues would join points of two lobe curves."""
+    d = mu.shape[1]
+    perms = jnp.asarray(list(itertools.permutations(range(d))))  # (d!, d); d <= 3
+
+    def step(prev, row):
+        cand = row[perms]  # (d!, d)
+        best = cand[jnp.argmin(jnp.sum(jnp.abs(cand - prev[None]), axis=1))]
+        return best, best
+
+    _, out = jax.lax.scan(step, mu[0], mu)
+    return out
+
+
 def stability_limit(lobes: Lobes, spindle_speed):
     """Lower envelope of the lobes on a spindle-speed grid [rpm]: the largest stable axial depth
-    [m] at each speed (NaN where no lobe point falls in a grid cell).
+    [m] at each speed (NaN where no lobe curve passes over a grid speed).
 
-    Each lobe curve is linearly interpolated onto the grid within its own speed range before the
-    minimum is taken, so the envelope does not depend on the chatter-frequency sampling.
+    Each lobe curve is followed through its points in chatter-frequency order; every segment
+    between two consecutive valid points is interpolated onto the grid speeds it spans (the
+    inverse depth linearly in speed: it is linear in Re G for one mode, where the depth runs off
+    to infinity at a lobe's steep flank; against Altintas' closed-form 1-DOF lobes this took the
+    error at the cusps from 3 % to 0.07 % on a 3000-point FRF), and the minimum is taken over all
+    segments of all lobes and branches.
+
+    Why segment by segment: near a pair of close modes, or where the FRF's phase turns back, a
+    lobe's speed is not monotone in the chatter frequency: the curve folds (posture_modal's
+    TX200 configuration 2: lobe 0 runs up to 1170 rpm, back to 1028 rpm and up again, over depths
+    3.5-5.7 mm). Sorting such a curve's points by speed and interpolating, as this function did
+    before, threads one line through the three passes of the fold, and the envelope zig-zagged
+    between 3.8 and 5.7 mm at 1030-1160 rpm; the stable depth is the lowest pass.
     """
     n = np.asarray(lobes.spindle_speed)
     a = np.asarray(lobes.depth)
     grid = np.asarray(spindle_speed, dtype=float)
     if grid.ndim != 1 or not np.all(np.diff(grid) > 0):
         raise ParameterError("stability_limit: spindle_speed must be a 1-D increasing grid [rpm]")
+    # segments between consecutive chatter frequencies of one lobe and branch: (n_lobes, nf-1, m)
+    x0, x1, y0, y1 = n[:, :-1], n[:, 1:], a[:, :-1], a[:, 1:]
+    ok = np.isfinite(x0) & np.isfinite(x1) & np.isfinite(y0) & np.isfinite(y1)
+    x0, x1, y0, y1 = x0[ok], x1[ok], y0[ok], y1[ok]
+    lo_x, hi_x = np.minimum(x0, x1), np.maximum(x0, x1)
+    lo = np.searchsorted(grid, lo_x, side="left")  # the grid speeds inside [lo_x, hi_x]
+    hi = np.searchsorted(grid, hi_x, side="right")
+    count = np.maximum(hi - lo, 0)
     env = np.full(grid.shape, np.inf)
-    for jl in range(n.shape[0]):
-        for b in range(n.shape[2]):
-            nn, aa = n[jl, :, b], a[jl, :, b]
-            good = np.isfinite(nn) & np.isfinite(aa)
-            # split into runs of consecutive valid points (a branch may be interrupted)
-            idx = np.flatnonzero(good)
-            if idx.size < 2:
-                continue
-            runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
-            for r in runs:
-                if r.size < 2:
-                    continue
-                x, y = nn[r], aa[r]
-                o = np.argsort(x)
-                x, y = x[o], y[o]
-                inside = (grid >= x[0]) & (grid <= x[-1])
-                env[inside] = np.minimum(env[inside], np.interp(grid[inside], x, y))
+    if count.sum():
+        seg = np.repeat(np.arange(count.size), count)
+        idx = np.arange(seg.size) - np.repeat(np.cumsum(count) - count, count) + lo[seg]
+        dx = x1[seg] - x0[seg]
+        t = np.where(dx != 0, (grid[idx] - x0[seg]) / np.where(dx != 0, dx, 1.0), 0.0)
+        # the inverse depth is interpolated: it is linear in Re G for one mode (a = -1 / (2 K_s Re G))
+        # and stays smooth where the depth itself runs off to infinity at a lobe's steep flank
+        r0, r1 = 1.0 / y0[seg], 1.0 / y1[seg]
+        vals = 1.0 / np.where(dx != 0, r0 + t * (r1 - r0), np.maximum(r0, r1))
+        np.minimum.at(env, idx, vals)
     env[~np.isfinite(env)] = np.nan
     return env
