@@ -1,4 +1,4 @@
-"""diagnosis.json, report.md and the plots of one diagnosis run."""
+"""diagnosis.json, report.md, report.html and the plots of one diagnosis run."""
 
 from __future__ import annotations
 
@@ -7,9 +7,40 @@ import pathlib
 import numpy as np
 
 from .._runs import write_results
+from . import _figures as FG
+from . import _html
 
 
-def _plots(diag, out: pathlib.Path) -> list[str]:
+def robot_name(case) -> str:
+    """The diagnosed robot's name: the robot YAML's ``name``, a URDF's ``<robot name>``, else the
+    robot entry of case.yaml (a config name such as ``panda``, or the file's stem)."""
+    import re
+
+    from .._config import load_yaml
+
+    try:
+        spec = str(load_yaml(case.path)["robot"])
+    except Exception:  # a name is a courtesy: never lose the report over it
+        return "the robot"
+    f = pathlib.Path(spec) if pathlib.Path(spec).is_absolute() else case.path.parent / spec
+    try:
+        if f.suffix in (".yaml", ".yml") and f.is_file():
+            return str(load_yaml(f).get("name") or f.stem)
+        if f.suffix == ".urdf" and f.is_file():
+            m = re.search(r"<robot[^>]*\sname\s*=\s*[\"']([^\"']+)", f.read_text(errors="replace"))
+            return m.group(1) if m else f.stem
+    except Exception:
+        return f.stem
+    return pathlib.Path(spec).stem
+
+
+def _fig(files, name, caption, section="other", dataset=None):
+    files.append(dict(file=name, caption=caption, section=section, dataset=dataset))
+
+
+def _plots(diag, out: pathlib.Path, robot: str, ev0: dict, evf: dict) -> list[dict]:
+    """Every figure of the report: dicts ``file``, ``caption``, ``section``, ``dataset``;
+    ``ev0``, ``evf``: the nominal and final models' evaluations on the validation sets."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -17,8 +48,17 @@ def _plots(diag, out: pathlib.Path) -> list[str]:
 
     pb, r = diag.problem, diag.result
     files = []
-    ev0 = pb.evaluate(diag.nominal)
-    evf = pb.evaluate(diag.final)
+    # measured vs nominal vs final, per validation set
+    for s in pb.tval:
+        if s.name in ev0 and s.name in evf:
+            taus = [s.tau + ev[s.name]["resid"] * s.scale for ev in (ev0, evf)]
+            name, cap = FG.torque_traces(plt, out, robot, s, pb.names, *taus, (ev0[s.name]["nrmse"], evf[s.name]["nrmse"]))
+            _fig(files, name, cap, "datasets", s.name)
+    for d in pb.fval:
+        if d.kind == "frf" and d.name in ev0 and d.name in evf:
+            name, cap = FG.frf_bode(plt, out, robot, d, ev0[d.name]["Hm"], evf[d.name]["Hm"],
+                                    (ev0[d.name]["nrmse"], evf[d.name]["nrmse"]))
+            _fig(files, name, cap, "datasets", d.name)
     # residual heat map over time x channel (first torque validation set)
     tv = [k for k, v in ev0.items() if v["kind"] == "torque"]
     if tv:
@@ -31,12 +71,14 @@ def _plots(diag, out: pathlib.Path) -> list[str]:
         im = ax.imshow(Z, aspect="auto", origin="lower", extent=[s.t[0], s.t[-1], -0.5, pb.n - 0.5], cmap="magma")
         ax.set_yticks(range(pb.n), pb.names)
         ax.set_xlabel("time [s]")
-        ax.set_title(f"nominal residual, {tv[0]} (windowed NRMSE %)")
-        fig.colorbar(im, ax=ax)
+        ax.set_title(f"{robot}: nominal model's torque error over time, set '{tv[0]}'")
+        fig.colorbar(im, ax=ax, label="windowed NRMSE [%]")
         fig.tight_layout()
         fig.savefig(out / "heat_time_channel.png", dpi=110)
         plt.close(fig)
-        files.append("heat_time_channel.png")
+        _fig(files, "heat_time_channel.png", f"The nominal model's torque error on the validation set '{tv[0]}' per joint "
+             "(rows) and time window (columns): the RMS error in the window over the joint's torque variation [%]. "
+             "A bright row is a joint the model misses; a bright column a part of the motion.", "where")
     # frequency x posture heat map (FRF band errors) and FRF overlays
     fr = [d for d in pb.fval if d.kind == "frf"]
     md = [d for d in pb.fval if d.kind == "modal"]
@@ -54,26 +96,14 @@ def _plots(diag, out: pathlib.Path) -> list[str]:
         ax.set_xscale("log")
         ax.set_yticks(range(len(fr)), [d.name for d in fr])
         ax.set_xlabel("frequency [Hz]")
-        ax.set_title("nominal FRF error per band and posture [%]")
-        fig.colorbar(im, ax=ax)
+        ax.set_title(f"{robot}: nominal model's FRF error per frequency band and posture")
+        fig.colorbar(im, ax=ax, label="RMS error / RMS |H| [%]")
         fig.tight_layout()
         fig.savefig(out / "heat_freq_posture.png", dpi=110)
         plt.close(fig)
-        files.append("heat_freq_posture.png")
-        fig, axs = plt.subplots(len(fr), 1, figsize=(8, 3 * len(fr)), squeeze=False)
-        for ax, d in zip(axs[:, 0], fr):
-            a = d.arrays
-            tr = lambda H: np.abs(H).sum(axis=(1, 2))
-            ax.loglog(a["freq"], tr(a["H"]), "k", label="measured")
-            ax.loglog(a["freq"], tr(ev0[d.name]["Hm"]), "C0--", label="nominal")
-            ax.loglog(a["freq"], tr(evf[d.name]["Hm"]), "C3", label="after diagnosis")
-            ax.set_title(f"{d.name}: sum of |H_ij| [m/N]")
-            ax.set_xlabel("frequency [Hz]")
-            ax.legend()
-        fig.tight_layout()
-        fig.savefig(out / "frf_overlay.png", dpi=110)
-        plt.close(fig)
-        files.append("frf_overlay.png")
+        _fig(files, "heat_freq_posture.png", "The nominal model's FRF error per frequency band (columns, log-spaced) "
+             "and validation FRF set (rows, one per posture): the RMS error in the band over the set's RMS |H| [%]. "
+             "A bright column is a resonance the model places wrong at every posture; a bright cell one posture.", "where")
     if md:
         K = max(len(d.arrays["freq"]) for d in md)
         Z = np.full((len(md), K), np.nan)
@@ -84,35 +114,22 @@ def _plots(diag, out: pathlib.Path) -> list[str]:
         im = ax.imshow(Z, aspect="auto", origin="lower", cmap="magma")
         ax.set_yticks(range(len(md)), [d.name for d in md])
         ax.set_xticks(range(K), [f"mode {k + 1}" for k in range(K)])
-        ax.set_title("nominal modal frequency error per mode and posture [%]")
-        fig.colorbar(im, ax=ax)
+        ax.set_title(f"{robot}: nominal model's natural-frequency error per mode and posture")
+        fig.colorbar(im, ax=ax, label="|f_model - f_measured| / f_measured [%]")
         fig.tight_layout()
         fig.savefig(out / "heat_mode_posture.png", dpi=110)
         plt.close(fig)
-        files.append("heat_mode_posture.png")
-    files += _response_plots(diag, out, plt)
-    # waterfall of the gap as effects are added
-    steps = r["steps"]
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    labels = ["nominal"] + [s["added"] for s in steps[1:]]
-    gaps = [s["gap"] for s in steps]
-    for i in range(len(gaps)):
-        lo = gaps[i] if i == 0 else min(gaps[i], gaps[i - 1])
-        hi = gaps[i] if i == 0 else max(gaps[i], gaps[i - 1])
-        ax.bar(i, hi - lo if i else hi, bottom=lo if i else 0, color="C0" if i == 0 else "C2")
-    ax.axhline(r["noise_floor"], color="k", ls="--", label="noise floor")
-    ax.set_xticks(range(len(labels)), labels, rotation=20, ha="right")
-    ax.set_ylabel("validation NRMSE [%]")
-    ax.set_title("gap as effects are added")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "waterfall.png", dpi=110)
-    plt.close(fig)
-    files.append("waterfall.png")
+        _fig(files, "heat_mode_posture.png", "The nominal model's relative natural-frequency error per measured mode "
+             "(columns) and validation modal set (rows, one per posture) [%]; each measured mode is matched to the "
+             "nearest model mode.", "where")
+    for name, cap, dataset in _response_plots(diag, out, plt, robot):
+        _fig(files, name, cap, "datasets", dataset)
+    name, cap = FG.waterfall(plt, out, robot, r["steps"], r["noise_floor"])
+    _fig(files, name, cap, "waterfall")
     return files
 
 
-def _response_plots(diag, out: pathlib.Path, plt) -> list[str]:
+def _response_plots(diag, out: pathlib.Path, plt, robot: str) -> list[tuple[str, str, str]]:
     """One figure per output-error (tip) set: measured, nominal and final simulated channels over
     time (left) and both residuals (right), one row per channel."""
     from . import _response as R
@@ -141,12 +158,14 @@ def _response_plots(diag, out: pathlib.Path, plt) -> list[str]:
                 ax2.legend(fontsize=8)
         axs[-1, 0].set_xlabel("time [s]")
         axs[-1, 1].set_xlabel("time [s]")
-        fig.suptitle(f"{s.name}: simulated from rest at q0 under the recorded torques")
+        fig.suptitle(f"{robot}: response set '{s.name}', simulated from rest at q0 under the recorded torques")
         fig.tight_layout()
-        name = f"response_{''.join(c if c.isalnum() or c in '-_' else '_' for c in s.name)}.png"
+        name = f"response_{FG.safe_name(s.name)}.png"
         fig.savefig(out / name, dpi=110)
         plt.close(fig)
-        files.append(name)
+        files.append((name, f"The response set '{s.name}' (output error): the model simulated from rest at the set's "
+                      "q0 under its recorded torques, measured (black), nominal (blue, dashed) and final (red) per "
+                      "channel (left) and each model's residual (right).", s.name))
     return files
 
 
@@ -154,8 +173,9 @@ def _fmt(x, nd=2):
     return "-" if x is None else (f"{x:.{nd}f}" if isinstance(x, float) else str(x))
 
 
-def markdown(r: dict, plots) -> str:
-    L = [f"# Gap diagnosis: {r['case']}", ""]
+def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None = None) -> str:
+    L = [f"# Gap diagnosis{' of ' + robot if robot else ''}: {r['case']}", "",
+         "The same report with its figures and the terms explained: [report.html](report.html).", ""]
     L.append(f"**Validation gap:** {r['gap_before']:.2f} % NRMSE before, {r['gap_after']:.2f} % after; noise floor "
              f"{r['noise_floor']:.2f} %. Gap significant: **{r['significant']}**; the excess over noise closed: "
              f"**{r['shrink']:.0f} %**; what remains is {'still' if r['remaining_significant'] else 'not'} significant.")
@@ -177,6 +197,8 @@ def markdown(r: dict, plots) -> str:
             L.append(f"| {m['link']} | {m['mass_cad_kg']:.3f} | {m['mass_kg']:.3f} | {ch} | {1e3 * m['com_shift_m']:.1f} | "
                      f"{'yes' if m['at_tolerance_bound'] else 'no'} |")
         L.append("")
+    if payload:
+        L += [f"**{_html.payload_line(payload).capitalize()}.**", ""]
     L.append("## Selected effects (in order added)")
     if r["selected"]:
         L += ["| effect | joint / link | gap after [%] | shrink [%] | score |", "|---|---|---|---|---|"]
@@ -252,17 +274,51 @@ def _params(p, ind=0):
     return "\n".join(out)
 
 
+def _modal_tables(pb, ev0, evf) -> dict:
+    """Per modal validation set: rows (mode, measured f, zeta, nominal f, error, final f, error)."""
+    out = {}
+    for d in pb.fval:
+        if d.kind != "modal" or d.name not in ev0 or d.name not in evf:
+            continue
+        a = d.arrays
+        rows = []
+        for k, (f, z) in enumerate(zip(a["freq"], a["zeta"])):
+            row = [str(k + 1), f"{f:.2f}", "-" if not np.isfinite(z) else f"{z:.4f}"]
+            for ev in (ev0, evf):
+                e = ev[d.name]
+                i = int(e["idx"][k]) if len(e["f_model"]) else -1
+                row += ["-", "-"] if i < 0 else [f"{e['f_model'][i]:.2f}", f"{100 * e['ef'][k]:+.1f}"]
+            rows.append(row)
+        out[d.name] = rows
+    return out
+
+
 def write_report(diag, out_dir) -> pathlib.Path:
-    """Write ``diagnosis.json``, ``report.md`` and the plots into ``out_dir``; returns the report path."""
+    """Write ``diagnosis.json``, ``report.md``, the self-contained ``report.html`` and the plots into
+    ``out_dir``; returns the path of report.md."""
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    write_results(out, diag.result, "diagnosis.json")
+    r, pb = diag.result, diag.problem
+    write_results(out, r, "diagnosis.json")
+    robot = robot_name(pb.case)
+    payload = _html.payload_summary(r.get("parameters", {}), pb.robot, pb.case.tool_frame)
+    ev0 = evf = None
     try:
-        plots = _plots(diag, out)
+        ev0, evf = pb.evaluate(diag.nominal), pb.evaluate(diag.final)
+        figures = _plots(diag, out, robot, ev0, evf)
     except Exception as exc:  # a plot must never lose the diagnosis itself
-        plots = []
-        diag.result["plot_error"] = f"{type(exc).__name__}: {exc}"
-        write_results(out, diag.result, "diagnosis.json")
+        figures = []
+        r["plot_error"] = f"{type(exc).__name__}: {exc}"
+        write_results(out, r, "diagnosis.json")
     path = out / "report.md"
-    path.write_text(markdown(diag.result, plots))
+    path.write_text(markdown(r, [f["file"] for f in figures], robot=robot, payload=payload))
+    set_gaps = {}
+    if ev0 is not None:
+        for k in ev0:
+            if k in evf:
+                set_gaps[k] = (ev0[k]["kind"], ev0[k]["nrmse"], evf[k]["nrmse"], r["noise_floor_per_dataset"].get(k, float("nan")),
+                               r.get("noise_floor_source", {}).get(k))
+    tables = _modal_tables(pb, ev0, evf) if ev0 is not None else {}
+    (out / "report.html").write_text(_html.page(r, out, figures, robot_name=robot, nominal_effects=pb.case.nominal_effects,
+                                                payload=payload, modal_tables=tables, set_gaps=set_gaps))
     return path

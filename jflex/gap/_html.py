@@ -1,0 +1,299 @@
+"""``report.html``: the diagnosis as one self-contained page an engineer reads at a glance.
+
+Figures are embedded as base64 PNG and the page loads nothing from the network. It says what
+was diagnosed (the robot, by name), the verdict and why the search stopped, why each effect was
+selected, the payload as a mass and a centre of mass in the tool frame, and, per validation data
+set, measured against nominal against final model; each figure is explained once in its caption.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import pathlib
+
+import numpy as np
+
+from ._selection import MIN_NAMED_SHRINK, MIN_STEP_SHRINK
+
+SECTIONS = {
+    "summary": "Verdict",
+    "selected": "Selected effects and why",
+    "model": "The model: nominal effects and fitted parameters",
+    "datasets": "Measured against nominal and final model, per validation data set",
+    "waterfall": "The gap as effects are added",
+    "where": "Where the nominal model misses",
+    "ranking": "Candidate ranking",
+    "terms": "How to read the numbers",
+}
+
+TERMS = [
+    ("gap", "the validation NRMSE [%] of a model on data no fit saw: torques rms(model - measured) / std(measured) "
+            "per joint; FRFs sqrt(sum |H_model - H|^2 / sum |H|^2); modal tables the RMS relative frequency error "
+            "(plus 0.1 x the damping error)."),
+    ("noise floor", "the gap that measurement noise alone would leave (from repeated records, else from the "
+                    "residual's high-frequency content): no model does better."),
+    ("excess", "sqrt(gap^2 - floor^2): the part of the gap a model can close."),
+    ("shrink", "the percentage of the nominal model's excess that a model closes (100 % = down to the noise)."),
+    ("step shrink", "the percentage of the excess left before a step that the step's effect closes."),
+    ("score", "how much an effect lowers the held-out information criterion (BIC form: the change of "
+              "N ln(mse) over the validation samples, plus a penalty of ln N per added parameter), with the sign "
+              "flipped: positive means the effect predicts held-out data better by more than its parameters cost; "
+              "the larger, the stronger the evidence."),
+    ("signature", "how well the nominal model's residual correlates with the pattern the effect would produce "
+                  "(e.g. the sign of the joint velocity for Coulomb friction), 0 to 1; it chooses which candidates "
+                  "are refitted, it does not select."),
+]
+
+VERDICTS = {
+    "explained": "the selected effects bring the gap to the noise floor or close most of the excess",
+    "partly_explained": "an effect was named but a significant gap remains",
+    "unexplained": "no effect of the candidate library closes enough of the gap to be named",
+    "within_noise": "the nominal model's gap is already within the noise floor",
+}
+
+
+def _e(x) -> str:
+    return html.escape(str(x))
+
+
+def _num(x, nd=2) -> str:
+    if isinstance(x, str):  # a law's name among the numbers
+        return _e(x)
+    return "-" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{x:.{nd}f}"
+
+
+def _table(head, rows, cls="") -> str:
+    h = "".join(f"<th>{_e(c)}</th>" for c in head)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+    return f'<table class="{cls}"><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def _figure(out: pathlib.Path, fig: dict) -> str:
+    data = base64.b64encode((out / fig["file"]).read_bytes()).decode("ascii")
+    return (f'<figure><img alt="{_e(fig["file"])}" src="data:image/png;base64,{data}">'
+            f'<figcaption><b>{_e(fig["file"])}</b>: {_e(fig["caption"])}</figcaption></figure>')
+
+
+def where_label(entry) -> str:
+    e = entry
+    return f"{e['effect']}@{e['joint']}" if e.get("joint") else (f"{e['effect']}@{e['link']}" if e.get("link") else e["effect"])
+
+
+def payload_summary(params: dict, robot, tool_frame) -> dict | None:
+    """The fitted payload as mass [kg] and centre of mass [m] in the tool frame (or the last link's
+    frame when the case names no tool frame on it); None when no payload was fitted."""
+    if "payload" in params.get("torque", {}):
+        p = params["torque"]["payload"]
+        m = float(p["m [kg]"])
+        mc = np.array([p["m cx [kg m]"], p["m cy [kg m]"], p["m cz [kg m]"]], dtype=float)
+        c_link = mc / m if m > 0 else np.zeros(3)
+        last = robot.nq - 1
+        frame = f"last link frame ({robot.link_names[last]})"
+        c = c_link
+        if tool_frame is not None:
+            body, k = robot.frame_index(tool_frame)
+            if body == last:
+                R = np.asarray(robot.frame_R[k]) if k >= 0 else np.eye(3)
+                pos = np.asarray(robot.frame_p[k]) if k >= 0 else np.zeros(3)
+                c, frame = R.T @ (c_link - pos), f"tool frame '{tool_frame}'"
+        return dict(mass_kg=m, com_m=c.tolist(), frame=frame, side="torque data (10 inertial parameters fitted)")
+    if "payload" in params.get("linear", {}):
+        m = float(params["linear"]["payload"]["mass [kg]"])
+        return dict(mass_kg=m, com_m=[0.0, 0.0, 0.0], frame=f"tool frame '{tool_frame}'",
+                    side="FRF/modal data (a point mass at the tool frame's origin)")
+    return None
+
+
+def payload_line(pl: dict) -> str:
+    c = 1e3 * np.asarray(pl["com_m"])
+    return (f"payload {pl['mass_kg']:.3f} kg, centre of mass at ({c[0]:.1f}, {c[1]:.1f}, {c[2]:.1f}) mm "
+            f"in the {pl['frame']}, fitted on {pl['side']}")
+
+
+def _group_label(side: str, key: str) -> str:
+    """The effect a parameter group belongs to, in the candidates' ``effect@where`` form (the
+    frequency side keys its springs by joint, ``<joint>_orth`` and ``<link>_bend``)."""
+    if side != "linear" or "@" in key or key == "payload":
+        return key
+    for suffix, effect in (("_orth_coupling", "coupling of orthogonal_compliance"), ("_bend_coupling", "coupling of link_flexibility"),
+                           ("_orth", "orthogonal_compliance"), ("_bend", "link_flexibility")):
+        if key.endswith(suffix):
+            return f"{effect}@{key[: -len(suffix)]}"
+    return f"joint_flexibility@{key}"
+
+
+def why_selected(i: int, s: dict, ranking: list) -> str:
+    """One sentence: why step ``i`` (0-based) added effect ``s``."""
+    rank = next((k + 1 for k, r in enumerate(ranking) if where_label(r) == where_label(s)), None)
+    first = i == 0
+    rule = (f"at least {MIN_STEP_SHRINK:.0f} % of the excess left before it"
+            + (f", and the first effect at least {MIN_NAMED_SHRINK:.0f} % of the nominal excess" if first else ""))
+    where = (f"ranked {rank} of {len(ranking)} when each candidate was added alone to the nominal model"
+             if rank is not None else
+             "not among the candidates refitted in the first round: after the effects before it were added, the "
+             "residual was ranked again by signature and it came first")
+    if not first and rank is not None and rank > 1:
+        where += ("; alone it closed little because a larger effect masked it, so its turn came once that "
+                  "effect was in the model")
+    return (f"It closed {s.get('step_shrink', s['shrink']):.0f} % of the excess left before it (rule: {rule}) and its "
+            f"score is {s['score']:.1f} (it pays for its parameters on held-out data); {where}.")
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1200px;margin:1.5em auto;
+padding:0 1em;color:#222;line-height:1.45}
+h1{font-size:1.6em;margin-bottom:.2em} h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.8em}
+table{border-collapse:collapse;margin:.6em 0;font-size:.92em} th,td{border:1px solid #ccc;padding:.25em .55em;
+text-align:left;vertical-align:top} th{background:#f3f3f3} td.n{text-align:right}
+figure{margin:1em 0} img{max-width:100%;border:1px solid #ddd} figcaption{font-size:.9em;color:#444;max-width:1000px}
+.verdict{font-size:1.15em;padding:.6em .8em;background:#f5f8ff;border-left:4px solid #3b6fd8}
+.tag{font-size:.8em;padding:0 .35em;border-radius:3px;background:#eee;color:#555}
+.tag.nominal{background:#e4eefc;color:#234} .tag.added{background:#e5f5e5;color:#1d5a1d}
+dl dt{font-weight:600} dl dd{margin:0 0 .5em 1.2em}
+"""
+
+
+def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, nominal_effects, payload,
+         modal_tables: dict, set_gaps: dict) -> str:
+    """The HTML page. ``figures``: dicts ``file``, ``caption``, ``section`` (a key of
+    :data:`SECTIONS`) and ``dataset`` (or None); ``modal_tables``: dataset -> rows of
+    (mode, measured f, zeta, nominal f, final f); ``set_gaps``: dataset -> (kind, nominal, final, floor, source)."""
+    H = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>Gap diagnosis: {_e(robot_name)}</title>"
+         f"<style>{_CSS}</style></head><body>",
+         f"<h1>Gap diagnosis of {_e(robot_name)}</h1><p>Case <code>{_e(r['case'])}</code>; "
+         f"diagnosis took {r['seconds']:.1f} s. Terms are defined at the <a href='#terms'>end of the page</a>.</p>"]
+
+    def sec(key):
+        H.append(f"<h2 id='{key}'>{_e(SECTIONS[key])}</h2>")
+
+    def figs(section, dataset=None):
+        for f in figures:
+            if f["section"] == section and f.get("dataset") == dataset:
+                H.append(_figure(out, f))
+
+    sec("summary")
+    v = r.get("verdict", "")
+    H.append(f"<p class='verdict'><b>{_e(v.replace('_', ' '))}</b>: {_e(VERDICTS.get(v, ''))}. "
+             f"The search stopped because {_e(r.get('stop_reason', ''))}.</p>")
+    H.append(f"<p>Validation gap <b>{r['gap_before']:.2f} %</b> with the nominal model, <b>{r['gap_after']:.2f} %</b> "
+             f"with the final one; noise floor {r['noise_floor']:.2f} %. The nominal gap is "
+             f"{'' if r['significant'] else 'not '}significant; the selected effects closed <b>{r['shrink']:.0f} %</b> "
+             f"of its excess over the noise, and what remains is {'still' if r['remaining_significant'] else 'not'} "
+             "significant.</p>")
+    if payload:
+        H.append(f"<p><b>{_e(payload_line(payload)).capitalize()}.</b></p>")
+
+    sec("selected")
+    if r["selected"]:
+        rows = []
+        for i, s in enumerate(r["selected"]):
+            rows.append([str(i + 1), _e(where_label(s)), _num(s["gap_after"]), f"{s.get('step_shrink', s['shrink']):.0f}",
+                         f"{s['shrink']:.0f}", _num(s["score"], 1), _e(why_selected(i, s, r["ranking"]))])
+        H.append(_table(["step", "effect", "gap after [%] (cumulative)", "step shrink [%]", "shrink [%] (cumulative)",
+                         "score", "why it was selected"], rows))
+    else:
+        H.append("<p>No effect was selected: " + _e(r.get("stop_reason", "")) + ".</p>")
+    if r.get("ambiguous"):
+        for a in r["ambiguous"]:
+            H.append(f"<p><b>Ambiguous:</b> {_e(a['effects'][0])} ({_e(a['joints'][0])}) and {_e(a['effects'][1])} "
+                     f"({_e(a['joints'][1])}) close {a['shrink'][0]:.0f} % and {a['shrink'][1]:.0f} % of the excess"
+                     f"{' (a known confounded pair)' if a['known_pair'] else ''}: more data sets or postures are needed "
+                     "to tell them apart.</p>")
+
+    sec("model")
+    listed = ", ".join(f"{n['effect']} ({', '.join(n.get('joints') or ()) or 'all joints'})" for n in nominal_effects)
+    H.append("<p>Effects marked <span class='tag nominal'>nominal</span> are part of the nominal model: case.yaml's "
+             f"<code>nominal_effects</code> ({_e(listed or 'none')}) and, on FRF/modal data, the joint springs. They "
+             "are refitted on the training data and never candidates. Effects marked <span class='tag added'>added</span> "
+             "were selected by the diagnosis.</p>")
+    rows = []
+    nominal_p, final_p = r.get("nominal_parameters", {}), r.get("parameters", {})
+    for side in sorted(set(nominal_p) | set(final_p)):
+        groups = list(dict.fromkeys(list(nominal_p.get(side, {})) + list(final_p.get(side, {}))))
+        for g in groups:
+            # what the nominal model already holds is nominal (case.yaml's nominal_effects, the joint springs
+            # of the frequency side); everything else the diagnosis added
+            tag = ("<span class='tag nominal'>nominal</span>" if g in nominal_p.get(side, {})
+                   else "<span class='tag added'>added</span>")
+            before, after = nominal_p.get(side, {}).get(g, {}), final_p.get(side, {}).get(g, {})
+            if g == "payload" and payload:
+                rows.append([f"{_e(g)} {tag}", "mass, centre of mass", "-", _e(payload_line(payload))])
+                continue
+            for k in dict.fromkeys(list(before) + list(after)):
+                rows.append([f"{_e(_group_label(side, g))} {tag}", _e(k), _num(before.get(k), 4) if k in before else "-",
+                             _num(after.get(k), 4) if k in after else "-"])
+    if rows:
+        H.append(_table(["effect", "parameter", "nominal model", "final model"], rows))
+    moves = r.get("inertia_refit") or []
+    if moves:
+        H.append("<p>The nominal inertias were refitted on the training data, pulled toward CAD within its tolerance: "
+                 f"{_e(r.get('inertia', ''))}. A link at its tolerance bound moved further than a CAD error does: "
+                 "a payload or a wrong part is the first place to look.</p>")
+        H.append(_table(["link", "mass CAD [kg]", "mass fitted [kg]", "change [%]", "COM shift [mm]", "at tolerance bound"],
+                        [[_e(m["link"]), _num(m["mass_cad_kg"], 3), _num(m["mass_kg"], 3),
+                          "-" if m["mass_change_pct"] is None else f"{m['mass_change_pct']:+.1f}",
+                          _num(1e3 * m["com_shift_m"], 1), "yes" if m["at_tolerance_bound"] else "no"] for m in moves]))
+
+    sec("datasets")
+    for name, (kind, g0, g1, fl, src) in set_gaps.items():
+        H.append(f"<h3>{_e(name)} ({_e(kind)})</h3><p>gap {g0:.2f} % nominal, {g1:.2f} % final; noise floor "
+                 f"{fl:.2f} % ({_e(src or 'estimated')}).</p>")
+        if name in modal_tables:
+            H.append(_table(["mode", "measured f [Hz]", "measured zeta", "nominal f [Hz]", "nominal error [%]",
+                             "final f [Hz]", "final error [%]"], modal_tables[name]))
+            H.append("<p>Each measured mode is matched one-to-one to the nearest model mode in relative frequency; a "
+                     "measured mode with no model mode within 10 % is one the model lacks.</p>")
+        figs("datasets", name)
+
+    sec("waterfall")
+    figs("waterfall")
+    H.append(_table(["step", "validation gap [%]", "excess over noise [%]"],
+                    [[_e(s["added"] or "nominal"), _num(s["gap"]), _num(s["excess"])] for s in r["steps"]]))
+
+    sec("where")
+    wh = r.get("where", [])[:20]
+    cols = [("data set", "dataset"), ("channel", "channel"), ("window [s]", "window_s"), ("band [Hz]", "band_hz"),
+            ("posture", "posture")]
+    cols = [c for c in cols if any(w.get(c[1]) is not None for w in wh)]  # only the columns some row fills
+
+    def cell(w, key):
+        x = w.get(key)
+        if x is None:
+            # a row that cuts nothing finer than its channel is the whole record
+            whole = key == cols[2][1] if len(cols) > 2 else False
+            return "whole set" if whole and all(w.get(k) is None for k in ("window_s", "band_hz", "posture")) else ""
+        if key == "window_s":
+            return "%.1f-%.1f" % tuple(x)
+        if key == "band_hz":
+            return "%.2f-%.2f" % tuple(x)
+        if key == "posture" and isinstance(x, dict):
+            if "variable" in x:
+                return f"correlates with {_e(x['variable'])} ({x['corr']:.2f})"
+            return _e(", ".join(f"{k}={v:.0f}" for k, v in x["q_deg"].items()) + " deg")
+        return _e(x)
+
+    if wh:
+        H.append("<p>The nominal model's validation error cut into pieces (per channel, time window, frequency band or "
+                 "posture), largest first: where to look before any effect is added.</p>")
+        H.append(_table([c[0] for c in cols] + ["NRMSE [%]"], [[cell(w, c[1]) for c in cols] + [_num(w["nrmse"])] for w in wh]))
+    figs("where")
+
+    sec("ranking")
+    H.append("<p>Each candidate added alone to the nominal model, refitted on the training data and scored on the "
+             "validation data, best first (by shrink, then score). Candidates are chosen for refitting by their "
+             "signature; the selection then adds effects one at a time (see above).</p>")
+    sel = {where_label(s) for s in r["selected"]}
+    rows = []
+    for i, s in enumerate(r["ranking"][:15]):
+        sg = s.get("signature")
+        rows.append([str(i + 1), _e(where_label(s)) + (" <span class='tag added'>selected</span>" if where_label(s) in sel else ""),
+                     _num(s["gap_after"]), f"{s['shrink']:.0f}", _num(s["score"], 1),
+                     "" if sg is None else f"{_e(sg['name'])}: {sg['value']:.2f}"])
+    H.append(_table(["#", "effect", "gap after [%]", "shrink [%]", "score", "signature"], rows))
+    figs("other")
+
+    sec("terms")
+    H.append("<dl>" + "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in TERMS) + "</dl>")
+    H.append("</body></html>")
+    return "\n".join(H)

@@ -1,0 +1,84 @@
+"""report.html of the demo diagnosis: written beside report.md, self-contained (figures embedded,
+nothing from the network), one image per promised figure, the named sections, nominal effects
+marked, and the payload as a mass and a centre of mass in the tool frame, checked against the
+demo case's hidden truth."""
+
+import base64
+import json
+import pathlib
+import re
+
+import numpy as np
+import pytest
+
+import jflex
+from jflex.gap import demo
+from jflex.gap._demo import DATA
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    demo(out, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def page(run):
+    return (run / "report.html").read_text()
+
+
+def test_report_html_beside_report_md_and_self_contained(run, page):
+    assert (run / "report.md").is_file()
+    assert "report.html" in (run / "report.md").read_text()
+    # nothing fetched: no http(s) or protocol-relative address in any src or href, no scripts
+    assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:)?//""", page, re.I)
+    assert "<script" not in page.lower() and "@import" not in page
+
+
+def test_one_embedded_image_per_promised_figure(run, page):
+    imgs = re.findall(r"<img\b[^>]*>", page)
+    alts = [re.search(r'alt="([^"]+)"', i).group(1) for i in imgs]
+    assert len(alts) == len(set(alts))
+    # promised: measured vs nominal vs final for every validation set of case.yaml, the waterfall,
+    # and every other plot the run wrote
+    case = jflex.load_yaml(run / "case" / "case.yaml")
+    promised = {"waterfall.png"}
+    for d in case["datasets"]:
+        if d["split"] == "validation" and d["kind"] in ("torque", "frf"):
+            promised.add(f"{d['kind']}_{d.get('name') or pathlib.Path(d['file']).stem}.png")
+    written = {p.name for p in run.glob("*.png")}
+    assert promised <= written
+    assert set(alts) == written
+    for tag, alt in zip(imgs, alts):  # the embedded bytes are the PNG the run wrote
+        data = re.search(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', tag).group(1)
+        assert base64.b64decode(data) == (run / alt).read_bytes()
+    # each figure explained once: one caption per image
+    assert len(re.findall(r"<figcaption>", page)) == len(imgs)
+
+
+def test_named_sections_and_terms(run, page):
+    for key in ("summary", "selected", "model", "datasets", "waterfall", "where", "ranking", "terms"):
+        assert re.search(rf"<h2 id='{key}'>", page), key
+    robot = jflex.load_yaml(run / "case" / "robot.yaml")["name"]
+    assert f"<h1>Gap diagnosis of {robot}</h1>" in page
+    for term in ("<dt>score</dt>", "<dt>signature</dt>", "<dt>noise floor</dt>", "<dt>shrink</dt>"):
+        assert term in page
+    diag = json.loads((run / "diagnosis.json").read_text())
+    assert diag["verdict"].replace("_", " ") in page and diag["stop_reason"] in page
+    # every selected effect comes with a reason; the case's nominal effects are marked nominal
+    assert page.count("It closed ") == len(diag["selected"])
+    nominal = jflex.load_yaml(run / "case" / "case.yaml")["nominal_effects"]
+    for n in nominal:
+        assert re.search(rf"{n['effect']}@\w+ <span class='tag nominal'>nominal</span>", page)
+
+
+def test_payload_line_gives_mass_in_kg_and_com_in_tool_frame(page):
+    m = re.search(r"[Pp]ayload (\d+\.\d+) kg, centre of mass at \(([-\d.]+), ([-\d.]+), ([-\d.]+)\) mm in the "
+                  r"tool frame", page)
+    assert m is not None
+    truth = next(e for e in json.loads((DATA / "demo_truth.json").read_text())["effects"] if e["effect"] == "payload")
+    # the generator placed the payload at the tool frame's origin plus 'offset' (tool axes = link axes here)
+    assert abs(float(m.group(1)) / truth["params"]["m"] - 1) < 0.05
+    com_mm = np.array([float(m.group(k)) for k in (2, 3, 4)])
+    assert np.max(np.abs(com_mm - 1e3 * np.asarray(truth["params"]["offset"]))) < 5.0
