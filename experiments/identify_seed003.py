@@ -55,7 +55,7 @@ class IdentifySeed003Config(_Strict):
     identify_on: Annotated[list[Annotated[int, Field(ge=0, le=2)]], Field(min_length=1, max_length=3)] = Field(
         [0], description="configurations of the first fit (0 = configuration 1)")
     start_factor: Positive = Field(1.0, description="start at the thesis' K, C times this factor")
-    weights: Weights = Weights()
+    weights: Weights = Field(default_factory=Weights)
     max_steps: Annotated[int, Field(ge=1)] = 100
 
 
