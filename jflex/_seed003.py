@@ -224,17 +224,22 @@ class Seed003Robot:
         J = np.exp(np.r_[sol.x, sol.x[1]])
         return J, res(sol.x)
 
-    def row_order(self, model, hold="actuated", frame=None):
+    def row_order(self, model, hold="actuated", frame=None, rows1=(0, 1, 2), postures=None):
         """The model modes in the thesis tables' row order at each EMA posture: configuration 1
         by frequency, the others paired with configuration 1's shapes
         (:func:`jflex.linear.pair_modes`, MAC first, frequency as tie-break), as Tables 4.5/4.6
-        label rows by mode shape. Returns (index (P, 3) int, MAC with configuration 1 (P, 3),
-        the :class:`jflex.linear.Modes` of all postures, batched)."""
+        label rows by mode shape. ``rows1``: the model modes (by frequency) of configuration 1
+        that are the table's rows (a model with more modes than rows, e.g. an added bearing
+        tilt); ``postures`` (P, n) default the EMA postures (robot joints, then any extra).
+        Returns (index (P, len(rows1)) int, MAC with configuration 1 (P, len(rows1)), the
+        :class:`jflex.linear.Modes` of all postures, batched)."""
         import jax
 
         from .linear import modal_analysis, pair_modes
 
-        modes = jax.vmap(lambda q: modal_analysis(model, q, hold=hold, frame=frame))(self.postures)
+        postures = self.postures if postures is None else np.asarray(postures)
+        modes = jax.vmap(lambda q: modal_analysis(model, q, hold=hold, frame=frame))(postures)
         f, S = np.asarray(modes.frequency), np.asarray(modes.shape)
-        pairs = [pair_modes(S[0][:, :3], S[k], f[0][:3], f[k]) for k in range(len(self.postures))]
+        r1 = np.asarray(rows1, dtype=int)
+        pairs = [pair_modes(S[0][:, r1], S[k], f[0][r1], f[k]) for k in range(len(postures))]
         return np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs]), modes
