@@ -187,8 +187,8 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     moves = r.get("inertia_refit") or []
     if moves:
         L += ["## Nominal identification: how far the CAD inertias moved", "",
-              "The nominal model's inertial parameters were refitted on the torque training data (with the nominal "
-              "friction), pulled toward CAD and kept within its tolerance. A link that reached the tolerance bound "
+              "The nominal model's inertial parameters were refitted on the training data (torque data with the nominal "
+              "friction, else FRF/modal data with the nominal springs), pulled toward CAD and kept within its tolerance. A link that reached the tolerance bound "
               "moved further than a CAD error does (a payload, a wrong part): the first place to look.", "",
               "| link | mass CAD [kg] | mass fitted [kg] | change [%] | COM shift [mm] | at tolerance bound |",
               "|---|---|---|---|---|---|"]
