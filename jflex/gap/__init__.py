@@ -13,6 +13,8 @@ from ._selection import (
     SIGNIFICANCE as SIGNIFICANCE,
     Selection as Selection,
     Step as Step,
+    DECISIVE_SCORE as DECISIVE_SCORE,
+    decisive as decisive,
     forward_select as forward_select,
     gap_summary as gap_summary,
     ic_delta as ic_delta,

@@ -25,7 +25,7 @@ from ._inertia import link_moves
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
 from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
-                         is_significant, rank_entries, step_record, stop_reason, verdict)
+                         decisive, is_significant, rank_entries, step_record, stop_reason, verdict)
 from ._signatures import SIGNATURE_NAMES, n_params, signatures
 from ._where import where
 
@@ -117,12 +117,12 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
             floor[k] = float(best)
             floor_source[k] = f"{floor_source.get(k, '')} (bounded by the best candidate's held-out gap)".strip()
     gap0, fl, exc0 = gap_summary(ev0, floor)
-    significant = is_significant(ev0, floor)
     for c in keep:
         st, ev = fitted[c]
         score = -ic_delta(ev, ev0, n_params(c, pb.user, bool(pb.ttrain)))
         ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c)))
         say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
+    significant = is_significant(ev0, floor) or decisive(ranking)
     order = rank_entries(ranking)
     ranking = [ranking[i] for i in order]
     keep = [keep[i] for i in order]
@@ -146,7 +146,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
 
     sel = forward_select(nom, ev0, floor, pool, refit, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain)), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
-                         first=fitted, on_select=on_select,
+                         first=fitted, on_select=on_select, significant=significant,
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of
                          # the excess is not named (the least bad candidate is not a diagnosis), unless it
                          # supplies a measured mode the model lacked (a missing degree of freedom)
