@@ -113,12 +113,12 @@ def _message(model, err) -> tuple[str, str]:
     return field_path(loc), msg
 
 
-def validate(model: type[BaseModel], data: Any, file: str | os.PathLike):
-    """``model.model_validate(data)``; a failure raises :class:`ConfigError`
+def validate(model: type[BaseModel], data: Any, file: str | os.PathLike, context: dict | None = None):
+    """``model.model_validate(data, context=context)``; a failure raises :class:`ConfigError`
     ``"<file>: field '<path>': <what is expected>, got <value>"`` for the first problem (the
     message counts the others and names their fields)."""
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=context)
     except ValidationError as exc:
         errs = [_message(model, e) for e in exc.errors(include_url=False)]
         fld, msg = errs[0]

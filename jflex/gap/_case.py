@@ -17,7 +17,7 @@ from .._config import load_robot
 from .._errors import ConfigError, DataError, JFlexError
 from .._runs import load_yaml
 from .._schema import validate
-from ._schema import EFFECT_NAMES, EFFECT_VALUES, FORMATS, KINDS, SPLITS, CaseSpec
+from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, file_format
 
 __all__ = ["Case", "Dataset", "load_case", "case_path", "EFFECT_NAMES", "KINDS", "SPLITS"]
 
@@ -415,14 +415,15 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
     :class:`jflex.gap._schema.CaseSpec` (the table in ``docs/case_format.md``).
     """
     from ._csv import csv_arrays
+    from ._rosbag import rosbag_arrays
     from ._uff import uff_arrays
 
     p = pathlib.Path(path)
     file = p / "case.yaml" if p.is_dir() else p
     if not file.is_file():
         raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
-    spec = validate(CaseSpec, load_yaml(file), file)
     base = file.parent
+    spec = validate(CaseSpec, load_yaml(file), file, context={"folder": base})
     robot = _load_robot(spec.robot, base, file, allow_outside)
     if spec.robot_inertia is not None:
         # link parameters realised from identified base parameters need not be physically
@@ -448,9 +449,11 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         if d.kind == "frf" and tool is None:
             raise _err(file, "tool_frame", f"needed by the frf data set {fld} (FRFs are at the tool frame)")
         fpath = case_path(base, d.file, f"{fld}.file", file, allow_outside)
-        fmt = FORMATS[pathlib.PurePath(d.file).suffix.lower()]
+        fmt = file_format(d.file, base)
         if fmt == "csv":
             arrs = csv_arrays(fpath, d, robot, file, fld)
+        elif fmt == "rosbag":
+            arrs = rosbag_arrays(fpath, d, robot, file, fld)
         elif fmt == "uff":
             arrs = uff_arrays(fpath, d, robot, file, fld)
         else:

@@ -9,7 +9,7 @@ import math
 import pathlib
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from .._schema import Strict, markdown_table
@@ -26,16 +26,26 @@ EFFECT_NAMES = (
 # nominal values an effect may state (every other coefficient is fitted)
 EFFECT_VALUES = {"joint_flexibility": ("stiffness", "damping"), "sensor_delay": ("value",), "rotor_inertia": ("value",)}
 
-# data file formats by suffix; which kinds each carries
-FORMATS = {".npz": "npz", ".csv": "csv", ".uff": "uff", ".unv": "uff"}
-FORMAT_KINDS = {"npz": KINDS, "csv": ("torque", "response", "modal"), "uff": ("frf",)}
+# data file formats by suffix (a ROS 2 bag may also be a folder holding metadata.yaml, see
+# file_format); which kinds each carries
+FORMATS = {".npz": "npz", ".csv": "csv", ".uff": "uff", ".unv": "uff", ".mcap": "rosbag"}
+FORMAT_KINDS = {"npz": KINDS, "csv": ("torque", "response", "modal"), "uff": ("frf",), "rosbag": ("torque", "response")}
 # CSV column map: the keys each kind needs and may take (a per-joint key maps joint -> column)
 CSV_COLUMNS = {
     "torque": (("time", "position", "torque"), ("velocity", "acceleration")),
     "response": (("time", "torque", "output"), ()),
     "modal": (("frequency", "damping_ratio"), ()),
 }
-_FORMAT_LABEL = {"npz": ".npz", "csv": ".csv", "uff": ".uff/.unv (UFF58)"}
+_FORMAT_LABEL = {"npz": ".npz", "csv": ".csv", "uff": ".uff/.unv (UFF58)", "rosbag": "ROS 2 bag (.mcap or bag folder)"}
+
+
+def file_format(file: str, folder: pathlib.Path | None = None) -> str | None:
+    """The format of the data ``file`` a case names: by its suffix, else ``rosbag`` for a folder
+    holding ``metadata.yaml`` (a ROS 2 bag) below ``folder``, the case folder; None if neither."""
+    fmt = FORMATS.get(pathlib.PurePath(file).suffix.lower())
+    if fmt is None and folder is not None and (pathlib.Path(folder) / file / "metadata.yaml").is_file():
+        return "rosbag"
+    return fmt
 FRF_QUANTITIES = ("receptance", "mobility", "accelerance")
 
 
@@ -166,13 +176,15 @@ class Dataset(Strict):
 
     kind: Literal[KINDS] = Field(description="what the file holds")
     file: Annotated[str, Field(min_length=1)] = Field(
-        description="`.npz`, `.csv` (torque, response, modal) or `.uff`/`.unv` (frf) inside the case folder")
+        description="`.npz`, `.csv` (torque, response, modal), `.uff`/`.unv` (frf) or a ROS 2 bag (`.mcap` or a bag "
+                    "folder; torque, response) inside the case folder")
     split: Literal[SPLITS] = Field(description="`train`: fitted; `validation`: the gap is judged on it")
     name: Annotated[str, Field(min_length=1)] | None = Field(None, description="unique name (default: the file's stem)")
     columns: Columns | None = Field(None, description="CSV only: the column map (required for a CSV file)")
     scale: dict[str, float] | None = Field(
-        None, description="CSV only: column -> factor applied to the raw column (e.g. current [A] x torque "
-                          "constant x gear ratio)", json_schema_extra={"expects": "mapping column: number != 0"})
+        None, description="CSV: column -> factor applied to the raw column (e.g. current [A] x torque constant x "
+                          "gear ratio); ROS 2 bag: joint -> factor applied to its `effort`",
+        json_schema_extra={"expects": "mapping column (or joint): number != 0"})
     units: Units | None = Field(None, description="CSV only: units of the time and angle columns")
     delimiter: Literal[",", ";", "tab", "space"] | None = Field(
         None, description="CSV only: field separator (default: sniffed from the header line)")
@@ -181,6 +193,8 @@ class Dataset(Strict):
                           "[rad, or `units.position`]", json_schema_extra={"expects": "list of numbers or mapping joint: number"})
     quantity: Literal[FRF_QUANTITIES] | None = Field(
         None, description="UFF only: what the records hold (default: read off their unit labels m, m/s, m/s^2)")
+    topic: Annotated[str, Field(min_length=1)] | None = Field(
+        None, description="ROS 2 bag only: the `sensor_msgs/msg/JointState` topic (default `/joint_states`)")
 
     @field_validator("scale", mode="before")
     @classmethod
@@ -211,19 +225,25 @@ class Dataset(Strict):
                    got=repr(v))
 
     @model_validator(mode="after")
-    def _format_keys(self):
-        fmt = FORMATS.get(pathlib.PurePath(self.file).suffix.lower())
+    def _format_keys(self, info: ValidationInfo):
+        fmt = file_format(self.file, (info.context or {}).get("folder"))
         if fmt is None:
-            raise _bad("file", "expected a .npz, .csv (torque, response, modal) or .uff/.unv (frf) file, got {got}",
+            raise _bad("file", "expected a .npz, .csv (torque, response, modal), .uff/.unv (frf) file or a ROS 2 bag "
+                       "(.mcap, or a folder holding metadata.yaml; torque, response), got {got}",
                        at="file", got=repr(self.file))
         if self.kind not in FORMAT_KINDS[fmt]:
             ok = " or ".join(_FORMAT_LABEL[f] for f, ks in FORMAT_KINDS.items() if self.kind in ks)
             raise _bad("file", "a {kind} data set cannot be a {fmt} file (expected {ok})", at="file", kind=self.kind,
                        fmt=fmt.upper(), ok=ok)
-        csv_only = ("columns", "scale", "units", "delimiter")
+        csv_only = ("columns", "units", "delimiter")
         for k in csv_only:
             if fmt != "csv" and getattr(self, k) is not None:
                 raise _bad("format_key", "only for CSV data sets (this file is {fmt})", at=k, fmt=fmt.upper())
+        if self.scale is not None and fmt not in ("csv", "rosbag"):
+            raise _bad("format_key", "only for CSV data sets and ROS 2 bags (this file is {fmt})", at="scale",
+                       fmt=fmt.upper())
+        if self.topic is not None and fmt != "rosbag":
+            raise _bad("format_key", "only for ROS 2 bags (this file is {fmt})", at="topic", fmt=fmt.upper())
         if self.quantity is not None and fmt != "uff":
             raise _bad("format_key", "only for UFF data sets", at="quantity")
         needs_q0 = fmt == "uff" or (fmt == "csv" and self.kind == "modal")
