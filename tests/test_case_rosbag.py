@@ -40,7 +40,7 @@ def write_bag(path, t, q, tau, names, qd=None, storage="mcap", topic="/joint_sta
     in reverse order, plus a gripper joint the model lacks. Returns the bag's path (the ``.mcap``
     file for MCAP, the bag folder for sqlite3)."""
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    order = list(range(len(names)))[::-1]
+    order = list(range(q.shape[1]))[::-1]  # the joints of q (all of the model, or fewer)
     with Writer(path, version=9, storage_plugin=plugin) as w:
         con = w.add_connection(topic, JS.__msgtype__, typestore=TS)
         other = w.add_connection("/rosout_text", STRING.__msgtype__, typestore=TS)
@@ -97,3 +97,117 @@ def test_bag_loads_to_the_npz_arrays(bag_case):
     np.testing.assert_allclose(case.datasets[0].arrays["qd"], npz.datasets[0].arrays["qd"], rtol=1e-9, atol=1e-9)
     a = case.datasets[1].arrays
     np.testing.assert_allclose(a["qd"], np.gradient(a["q"], a["t"], axis=0), rtol=1e-12)
+
+
+def _one_bag_case(folder, bag_case, **kw):
+    """A copy of the bag case whose train set is a new bag written with ``kw`` (from the train NPZ)."""
+    src, npz, names = bag_case
+    folder.mkdir(parents=True, exist_ok=True)
+    for f in ("robot.yaml",):
+        (folder / f).write_text((src / f).read_text())
+    a = npz.datasets[0].arrays
+    t = kw.pop("t", a["t"])
+    q, tau = kw.pop("q", a["q"]), kw.pop("tau", a["tau"])
+    bag = write_bag(folder / "log", t, q, tau, names, **kw)
+    cfg = yaml.safe_load((src / "case.yaml").read_text())
+    cfg["datasets"][0] = _entry(folder, bag, "train", names)
+    val = cfg["datasets"][1]["file"]
+    (folder / val).mkdir()
+    for f in (src / val).iterdir():
+        (folder / val / f.name).write_bytes(f.read_bytes())
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return folder, cfg, names
+
+
+def test_jittered_stamps_are_resampled(tmp_path, bag_case):
+    a = bag_case[1].datasets[0].arrays
+    rng = np.random.default_rng(0)
+    h = a["t"][1] - a["t"][0]
+    s = a["t"] + rng.uniform(-0.1, 0.1, a["t"].size) * h  # jitter of 10 % of a step
+    # the messages sample the NPZ motion at the jittered stamps
+    qs = np.column_stack([np.interp(s, a["t"], a["q"][:, j]) for j in range(a["q"].shape[1])])
+    taus = np.column_stack([np.interp(s, a["t"], a["tau"][:, j]) for j in range(a["tau"].shape[1])])
+    folder, _, _ = _one_bag_case(tmp_path / "c", bag_case, t=s - s[0], q=qs, tau=taus, stamped=False)
+    d = load_case(folder).datasets[0].arrays
+    sr = np.round((s - s[0]) * 1e9) * 1e-9  # the stamps as the bag holds them (ns)
+    # no message dropped: the grid spans the log in as many samples
+    assert d["t"].size == s.size and d["t"][0] == 0
+    np.testing.assert_allclose(d["t"], np.linspace(0, sr[-1], s.size), rtol=1e-12, atol=1e-12)
+    for k, raw in (("q", qs), ("tau", taus)):
+        ref = np.column_stack([np.interp(d["t"], sr, raw[:, j]) for j in range(raw.shape[1])])
+        np.testing.assert_allclose(d[k], ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    # a jitter below 1 % of a step is kept as it is, the receive time (every stamp zero) read
+    s2 = a["t"] + rng.uniform(-0.004, 0.004, a["t"].size) * h
+    folder, _, _ = _one_bag_case(tmp_path / "d", bag_case, t=s2, stamped=False)
+    np.testing.assert_allclose(load_case(folder).datasets[0].arrays["t"], s2 - s2[0], atol=1e-9)
+
+
+def test_a_bag_folder_outside_the_case_is_refused(tmp_path, bag_case):
+    folder, cfg, _ = _one_bag_case(tmp_path / "c", bag_case)
+    outside = write_bag(tmp_path / "elsewhere", *(bag_case[1].datasets[0].arrays[k] for k in ("t", "q", "tau")),
+                        bag_case[2], storage="sqlite3")
+    cfg["datasets"][0]["file"] = "../elsewhere"
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[0\]\.file.*outside the case folder"):
+        load_case(folder)
+    assert load_case(folder, allow_outside=True).datasets[0].file.resolve() == outside.resolve()
+
+
+def _case_with(tmp_path, bag_case, edit=None, **kw):
+    folder, cfg, names = _one_bag_case(tmp_path / "c", bag_case, **kw)
+    if edit is not None:
+        edit(cfg["datasets"][0])
+        (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return folder
+
+
+@pytest.mark.parametrize("kw, edit, err, words", [
+    ({"topic": "/arm/joint_states"}, None, jflex.DataError,
+     ["log.mcap", "datasets[0].topic", "'/joint_states'", "'/arm/joint_states'", "'/rosout_text'"]),
+    ({}, lambda d: d.update(topic="/rosout_text"), jflex.DataError,
+     ["datasets[0].topic", "std_msgs/msg/String", "sensor_msgs/msg/JointState"]),
+    ({"effort": False}, None, jflex.DataError, ["log.mcap", "message 0", "field 'effort'", "empty"]),
+    ({}, lambda d: d["scale"].update(wrist=2.0), jflex.ConfigError, ["datasets[0].scale.wrist", "shoulder"]),
+    ({}, lambda d: d["scale"].update(elbow=0), jflex.ConfigError, ["datasets[0].scale.elbow"]),
+    ({}, lambda d: d.update(units={"time": "ms"}), jflex.ConfigError, ["datasets[0].units", "only for CSV"]),
+    ({}, lambda d: d.update(file="nobag"), jflex.ConfigError, ["datasets[0].file", "metadata.yaml"]),
+])
+def test_bag_errors_name_the_field(tmp_path, bag_case, kw, edit, err, words):
+    folder = _case_with(tmp_path, bag_case, edit, **kw)
+    with pytest.raises(err) as e:
+        load_case(folder)
+    for w in words:
+        assert w in str(e.value), (w, str(e.value))
+
+
+def test_a_model_joint_missing_from_name(tmp_path, bag_case):
+    _, npz, names = bag_case
+    a = npz.datasets[0].arrays
+    folder = _case_with(tmp_path, bag_case, None, q=a["q"][:, :1], tau=a["tau"][:, :1])
+    # write_bag names joints by their index in q: one column, the model's first joint only
+    with pytest.raises(jflex.DataError) as e:
+        load_case(folder)
+    msg = str(e.value)
+    assert "field 'name'" in msg and repr(names[1]) in msg and "message 0" in msg and "log.mcap" in msg
+
+
+def test_topic_on_a_npz_set_and_missing_rosbags(tmp_path, bag_case, monkeypatch):
+    folder, cfg, _ = _one_bag_case(tmp_path / "c", bag_case)
+    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # as if rosbags were not installed
+    with pytest.raises(jflex.DataError, match=r"datasets\[0\]\.file.*pip install \"jflex\[ros\]\""):
+        load_case(folder)
+    monkeypatch.undo()
+    np.savez(folder / "x.npz", **bag_case[1].datasets[0].arrays)
+    cfg["datasets"][0] = {"kind": "torque", "file": "x.npz", "split": "train", "topic": "/joint_states"}
+    (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[0\]\.topic.*only for ROS 2 bags"):
+        load_case(folder)
+
+
+def test_bag_case_diagnosis_finds_the_planted_friction(bag_case):
+    folder, _, _ = bag_case
+    truth = yaml.safe_load((folder.parent / "visc.truth.json").read_text())["effects"][0]
+    r = diagnose(folder).result
+    assert r["significant"]
+    assert (r["selected"][0]["effect"], r["selected"][0]["joint"]) == ("viscous_friction", truth["joint"])
+    assert r["gap_after"] < 0.5 * r["gap_before"]
