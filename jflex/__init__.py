@@ -69,6 +69,7 @@ _LAZY_MODULES = {
         "model_inverse_dynamics", "state_rate",
     ),
     "._sweep": ("batched", "sweep"),
+    "._derivatives": ("aba_derivatives", "rnea_derivatives"),
     "._allocator": ("tune_allocator",),
     "._config": ("available_robots", "load_robot", "robot_from_config"),
     ".linear": ("frf", "frf_sweep", "mac", "modal_analysis", "stability_lobes", "track_modes"),
