@@ -35,7 +35,7 @@ def _stamp(ns):
 
 
 def write_bag(path, t, q, tau, names, qd=None, storage="mcap", topic="/joint_states", stamped=True, extra=True,
-              effort=True):
+              effort=True, unstamped=()):
     """A bag of JointState messages at times ``t`` [s]: efforts are motor currents [A]; the joints
     in reverse order, plus a gripper joint the model lacks. Returns the bag's path (the ``.mcap``
     file for MCAP, the bag folder for sqlite3)."""
@@ -50,7 +50,7 @@ def write_bag(path, t, q, tau, names, qd=None, storage="mcap", topic="/joint_sta
             pos = [q[k, j] for j in order] + ([0.02] if extra else [])
             vel = [qd[k, j] for j in order] + ([0.0] if extra else []) if qd is not None else []
             eff = [tau[k, j] / (KT * GEAR) for j in order] + ([0.1] if extra else []) if effort else []
-            msg = JS(header=HEADER(stamp=_stamp(ns if stamped else 0), frame_id=""),
+            msg = JS(header=HEADER(stamp=_stamp(ns if stamped and k not in unstamped else 0), frame_id=""),
                      name=[names[j] for j in order] + (["gripper"] if extra else []),
                      position=np.asarray(pos, float), velocity=np.asarray(vel, float), effort=np.asarray(eff, float))
             w.write(con, ns + 2_000_000, TS.serialize_cdr(msg, JS.__msgtype__))  # received 2 ms later
@@ -211,3 +211,21 @@ def test_bag_case_diagnosis_finds_the_planted_friction(bag_case):
     assert r["significant"]
     assert (r["selected"][0]["effect"], r["selected"][0]["joint"]) == ("viscous_friction", truth["joint"])
     assert r["gap_after"] < 0.5 * r["gap_before"]
+
+
+def test_stamp_problems_are_refused(tmp_path, bag_case):
+    a = bag_case[1].datasets[0].arrays
+    folder = _case_with(tmp_path / "mixed", bag_case, unstamped=(7,))
+    with pytest.raises(jflex.DataError, match=r"log\.mcap: topic '/joint_states', message 7: field 'header\.stamp'"):
+        load_case(folder)
+    # ten messages dropped, the rest jittered: resampling would bridge the gap
+    keep = np.r_[0:100, 110:a["t"].size]
+    h = a["t"][1] - a["t"][0]
+    s = a["t"][keep] + np.random.default_rng(1).uniform(-0.05, 0.05, keep.size) * h
+    folder = _case_with(tmp_path / "gap", bag_case, t=s, q=a["q"][keep], tau=a["tau"][keep])
+    with pytest.raises(jflex.DataError, match=r"field 'header\.stamp': a gap of 0\.05\d* s"):
+        load_case(folder)
+    folder = _case_with(tmp_path / "junk", bag_case)
+    (folder / "log" / "log.mcap").write_bytes(b"not an mcap file")
+    with pytest.raises(jflex.DataError, match=r"log\.mcap: field 'datasets\[0\]\.file': not a readable ROS 2 bag"):
+        load_case(folder)
