@@ -229,3 +229,13 @@ def test_stamp_problems_are_refused(tmp_path, bag_case):
     (folder / "log" / "log.mcap").write_bytes(b"not an mcap file")
     with pytest.raises(jflex.DataError, match=r"log\.mcap: field 'datasets\[0\]\.file': not a readable ROS 2 bag"):
         load_case(folder)
+
+
+def test_a_response_bag_gives_torques_and_joint_outputs(tmp_path, bag_case):
+    _, npz, names = bag_case
+    folder = _case_with(tmp_path, bag_case, lambda d: d.update(kind="response"))
+    d = load_case(folder).datasets[0]
+    a = npz.datasets[0].arrays
+    assert d.kind == "response" and d.arrays["channels"] == tuple(names)
+    np.testing.assert_allclose(d.arrays["y"], a["q"], rtol=1e-9, atol=1e-9)  # the gripper is no output
+    np.testing.assert_allclose(d.arrays["tau"], a["tau"], rtol=1e-9, atol=1e-9 * np.abs(a["tau"]).max())
