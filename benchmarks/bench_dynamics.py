@@ -221,6 +221,11 @@ def main(argv=None):
     ap.add_argument("--out", default=None)
     ap.add_argument("--malloc", choices=["hugetlb", "default"], default="hugetlb",
                     help="glibc allocator setting for this process (see the module docstring)")
+    ap.add_argument("--section", choices=["all", "dynamics", "derivatives"], default="all",
+                    help="the rigid-body table, the derivatives section (issue 14), or both")
+    ap.add_argument("--deriv-batches", type=int, nargs="+", default=[1000, 100000])
+    ap.add_argument("--deriv-algorithms", nargs="+", default=list(DERIV_ALGORITHMS), choices=list(DERIV_ALGORITHMS))
+    ap.add_argument("--threads", type=int, default=2, help="threads of Pinocchio's *InParallel batches")
     args = ap.parse_args(argv)
     tunable = "glibc.malloc.hugetlb=1"
     if args.malloc == "hugetlb" and tunable not in os.environ.get("GLIBC_TUNABLES", "") and argv is None:
@@ -232,7 +237,7 @@ def main(argv=None):
     rows = []
     print(f"jax {jax.__version__} on {jax.devices()[0].platform} ({platform.processor() or platform.machine()}), float64, Panda 7 joints, "
           f"GLIBC_TUNABLES={os.environ.get('GLIBC_TUNABLES', '(unset)')}")
-    for N in args.batches:
+    for N in args.batches if args.section != "derivatives" else []:
         q = rng.uniform(-1.5, 1.5, (N, robot.nq))
         qd, qdd = rng.normal(size=(2, N, robot.nq))
         tau = jax.jit(jax.vmap(lambda a, b, c: jflex.rnea(robot, a, b, c)))(q, qd, qdd)
@@ -272,6 +277,96 @@ def main(argv=None):
     if args.out:
         pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
         (pathlib.Path(args.out) / "bench_dynamics.json").write_text(json.dumps({"jax": jax.__version__, "glibc_tunables": os.environ.get("GLIBC_TUNABLES"), "rows": rows}, indent=2))
+    if args.section != "dynamics":
+        drows = bench_derivatives(robot, model, args.deriv_batches, args.deriv_algorithms, args.threads)
+        if args.out:
+            (pathlib.Path(args.out) / "bench_derivatives.json").write_text(json.dumps({"jax": jax.__version__, "rows": drows}, indent=2))
+    return rows
+
+
+# ---- derivatives (issue 14): jflex's analytic kernels against Pinocchio's, and the batched
+# rigid-body kernels against Pinocchio's own multi-threaded batch ---------------------------
+
+DERIV_ALGORITHMS = {
+    # name: (jflex per-state function of (q, qd, qdd, tau), Pinocchio per-state call, Pinocchio batch)
+    "rnea_derivatives": (lambda r, a, b, c, d: jflex.rnea_derivatives(r, a, b, c),
+                         lambda pin, m, x, a, b, c, d: pin.computeRNEADerivatives(m, x, a, b, c), None),
+    "aba_derivatives": (lambda r, a, b, c, d: jflex.aba_derivatives(r, a, b, d),
+                        lambda pin, m, x, a, b, c, d: pin.computeABADerivatives(m, x, a, b, d), None),
+    "rnea": (lambda r, a, b, c, d: jflex.rnea(r, a, b, c),
+             lambda pin, m, x, a, b, c, d: pin.rnea(m, x, a, b, c), "rneaInParallel"),
+    "aba": (lambda r, a, b, c, d: jflex.aba(r, a, b, d),
+            lambda pin, m, x, a, b, c, d: pin.aba(m, x, a, b, d), "abaInParallel"),
+}
+
+
+def pinocchio_batches():
+    """Pinocchio's batched entry points in this build (ModelPool + *InParallel), by name."""
+    import pinocchio as pin
+
+    return sorted(n for n in dir(pin) if "InParallel" in n or n.endswith("Pool"))
+
+
+def bench_derivatives(robot, model, batches, algorithms, threads=2):
+    """Per state: jflex batched (``jit(vmap)``; RNEA and ABA as in ``bench_jflex``) against
+    Pinocchio called one state at a time in a Python loop and, where this build has one, its
+    ``*InParallel`` batch on ``threads`` threads (a ModelPool). Results are checked on the first
+    ``CHECK`` states (the parallel batch on all of them) before any timing is reported."""
+    import pinocchio as pin
+
+    found = pinocchio_batches()
+    has_deriv = any("Derivatives" in n for n in found)
+    print(f"\nderivatives section; Pinocchio {pin.__version__} batch entry points: {found}"
+          + ("" if has_deriv else " (no multi-threaded derivatives batch among them)"), flush=True)
+    rng = np.random.default_rng(1)
+    rows = []
+    data = model.createData()
+    for N in batches:
+        q = rng.uniform(-1.5, 1.5, (N, robot.nq))
+        qd, qdd = rng.normal(size=(2, N, robot.nq))
+        tau = np.array([pin.rnea(model, data, q[i], qd[i], qdd[i]) for i in range(N)])
+        for name in algorithms:
+            jfn, pfn, par = DERIV_ALGORITHMS[name]
+            f = lambda a, b, c, d, jfn=jfn: jfn(robot, a, b, c, d)
+            # the derivative kernels run fused: XLA:CPU without fusion (jax 0.10.2) returned wrong
+            # dtau/dqd and M for them (the check below caught it)
+            jf = jax.jit(jax.vmap(f)) if "derivatives" in name else jflex.batched(f, batch_size=min(N, 4096), fuse=False)
+            t0 = time.perf_counter()
+            out = jax.block_until_ready(jf(q, qd, qdd, tau))
+            compile_s = time.perf_counter() - t0
+            out = [np.asarray(o) for o in (out if isinstance(out, tuple) else (out,))]
+            # copies: Pinocchio returns views of its Data's buffers, overwritten by the next call
+            ref = [[np.array(x) for x in (r if isinstance(r, tuple) else (r,))]
+                   for r in (pfn(pin, model, data, q[i], qd[i], qdd[i], tau[i]) for i in range(min(N, CHECK)))]
+            ref = [np.array([r[k] for r in ref]) for k in range(len(out))]
+            diff = max(float(np.abs(o[: len(r)] - r).max() / np.abs(r).max()) for o, r in zip(out, ref))
+            if not diff < 1e-9:
+                raise SystemExit(f"{name}: jflex differs from Pinocchio by {diff:.1e} at batch {N}; timings would be meaningless")
+            jt = best_time(lambda: jax.block_until_ready(jf(q, qd, qdd, tau)))
+            pt = best_time(lambda: [pfn(pin, model, data, q[i], qd[i], qdd[i], tau[i]) for i in range(N)], reps=2 if N > 1000 else 3)
+            row = {"batch": N, "algorithm": name, "jflex_us": 1e6 * jt / N, "jflex_compile_s": compile_s,
+                   "max_rel_diff_vs_pinocchio": diff, "pinocchio_loop_us": 1e6 * pt / N, "pinocchio_parallel_us": None}
+            if par is not None and par in found:
+                pool = pin.ModelPool(model, threads)
+                qT, vT, aT = np.asfortranarray(q.T), np.asfortranarray(qd.T), np.asfortranarray(qdd.T)
+                tT = np.asfortranarray(tau.T)
+                call = (lambda: getattr(pin, par)(threads, pool, qT, vT, aT)) if par == "rneaInParallel" else (
+                    lambda: getattr(pin, par)(threads, pool, qT, vT, tT))
+                pres = np.asarray(call()).T
+                pdiff = float(np.abs(out[0] - pres).max() / np.abs(pres).max())
+                if not pdiff < 1e-9:
+                    raise SystemExit(f"{name}: Pinocchio's {par} differs from jflex by {pdiff:.1e}")
+                row["pinocchio_parallel_us"] = 1e6 * best_time(call) / N
+                row["pinocchio_parallel_threads"] = threads
+            row["ratio_pin_over_jflex"] = row["pinocchio_loop_us"] / row["jflex_us"]
+            row["ratio_pin_parallel_over_jflex"] = (row["pinocchio_parallel_us"] / row["jflex_us"]
+                                                    if row["pinocchio_parallel_us"] else None)
+            rows.append(row)
+            fmt = lambda v, f: "-" if v is None else f.format(v)
+            print(f"{N:>7} {name:<17} jflex {row['jflex_us']:8.3f} us  pin loop {row['pinocchio_loop_us']:8.3f} us "
+                  f"(x{row['ratio_pin_over_jflex']:.2f})  pin {threads}-thread batch {fmt(row['pinocchio_parallel_us'], '{:8.3f}')} us "
+                  f"(x{fmt(row['ratio_pin_parallel_over_jflex'], '{:.2f}')})  compile {compile_s:.1f} s  max rel diff {diff:.1e}",
+                  flush=True)
     return rows
 
 

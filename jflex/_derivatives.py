@@ -27,6 +27,7 @@ and for ``i`` a strict ancestor of ``j`` the change of the subtree force ``Fc_j`
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from . import _scalar as s
@@ -72,8 +73,9 @@ def _world_pass(robot: Robot, c, q, qd, qdd, f_ext):
         V[i] = (Vp[0] + S[i][0].scale(qd[i]), Vp[1] + S[i][1].scale(qd[i]))
         bw, bv = s.cross_motion(*V[i], S[i][0].scale(qd[i]), S[i][1].scale(qd[i]))
         A[i] = (Ap[0] + S[i][0].scale(qdd[i]) + bw, Ap[1] + S[i][1].scale(qdd[i]) + bv)
-        Y[i] = c.inertia[i].to_parent(oR, op)
-        h[i] = Y[i].apply(*V[i])
+        S[i], V[i], A[i] = _fence6(c.fence, S[i], V[i], A[i])
+        (Y[i],) = _fence6(c.fence, c.inertia[i].to_parent(oR, op))
+        (h[i],) = _fence6(c.fence, Y[i].apply(*V[i]))
         Yd[i] = _inertia_rate(Y[i], *V[i])
         fn, ff = _add6(Y[i].apply(*A[i]), s.cross_force(*V[i], *h[i]))
         if f_ext is not None:
@@ -81,7 +83,7 @@ def _world_pass(robot: Robot, c, q, qd, qdd, f_ext):
             fb, nb = oR.mv(s.V3(f_ext[i, 0], f_ext[i, 1], f_ext[i, 2])), oR.mv(s.V3(f_ext[i, 3], f_ext[i, 4], f_ext[i, 5]))
             fn, ff = fn - nb - s.cross(op, fb), ff - fb
         F[i] = (fn, ff)
-        (S[i], V[i], A[i], Y[i], Yd[i], h[i], F[i]) = _fence6(c.fence, S[i], V[i], A[i], Y[i], Yd[i], h[i], F[i])
+        Y[i], Yd[i], h[i], F[i] = _fence6(c.fence, Y[i], Yd[i], h[i], F[i])
     return S, V, A, Y, Yd, h, F
 
 
@@ -111,6 +113,14 @@ def _kernel(robot: Robot, q, qd, qdd, f_ext):
     """(dtau_dq, dtau_dqd, M) as nested lists of scalars."""
     n = robot.nq
     c = consts(robot)
+    if c.fence is None and isinstance(q, jax.core.Tracer):  # compiled, not run op by op
+        # XLA:CPU drops optimization barriers before fusing, and then recomputes every shared
+        # per-body vector in each of its O(n^2) consumers; conditionals on a run-time predicate stay
+        # boundaries (see _scalar.barrier). NaN q never passes the argument checks, so the branch
+        # that returns NaN is never taken.
+        from equinox.internal import unvmap_any
+
+        c = c._replace(fence=unvmap_any(jnp.isnan(q[0])))
     S, V, A, Y, Yd, h, F = _world_pass(robot, c, q, qd, qdd, f_ext)
     # subtree sums (world frame: no transforms)
     Yc, Ydc, hc, Fc = list(Y), list(Yd), list(h), list(F)
@@ -133,10 +143,10 @@ def _kernel(robot: Robot, q, qd, qdd, f_ext):
         else:
             e[j] = s.cross_motion(*V[par], *Sj)
             cj[j] = _add6(s.cross_motion(*A[par], *Sj), s.cross_motion(*V[par], *e[j]))
+        e[j], cj[j] = _fence6(c.fence, e[j], cj[j])
         Ag[j] = Yc[j].apply(*Sj)
         # Dc^T S = Ydot_c S - S x* hc  (Ydot symmetric; the transpose of x -> x x* h is -(. x* h))
-        yS = Ydc[j].apply(*Sj)
-        xS = s.cross_force(*Sj, *hc[j])
+        yS, xS = _fence6(c.fence, Ydc[j].apply(*Sj), s.cross_force(*Sj, *hc[j]))
         G[j] = (yS[0] - xS[0], yS[1] - xS[1])
         # Dc e = Ydot_c e + e x* hc ;  Dc S = Ydot_c S + S x* hc
         De = _add6(Ydc[j].apply(*e[j]), s.cross_force(*e[j], *hc[j]))
@@ -144,7 +154,7 @@ def _kernel(robot: Robot, q, qd, qdd, f_ext):
         Yce = Yc[j].apply(*e[j])
         dFq[j] = _add6(_add6(Yc[j].apply(*cj[j]), De), s.cross_force(*Sj, *Fc[j]))
         dFv[j] = _add6((Yce[0].scale(2.0), Yce[1].scale(2.0)), DS)
-        Ag[j], G[j], e[j], cj[j], dFq[j], dFv[j] = _fence6(c.fence, Ag[j], G[j], e[j], cj[j], dFq[j], dFv[j])
+        Ag[j], G[j], dFq[j], dFv[j] = _fence6(c.fence, Ag[j], G[j], dFq[j], dFv[j])
     dq = [[0.0] * n for _ in range(n)]
     dv = [[0.0] * n for _ in range(n)]
     M = [[0.0] * n for _ in range(n)]
