@@ -269,10 +269,47 @@ def test_backlash_columns_split_posture_and_engagement_impulse(rotor_case):
     cols = T.Term("backlash", 1, (0.01, 0.008)).columns(s)
     assert cols.shape == s.q.shape + (1 + len(T.BACKLASH_PULSES),)
     assert np.all(np.isfinite(cols)) and np.abs(cols[:, :, 0]).max() > 0
-    fit = T.fit_with((), 0.0, T.Term("backlash", 1), [s])
+    fit = T.fit_play_backlash((), 0.0, 1, [s])
     b, te = T.backlash_hyper(fit.terms[-1].hyper)
     assert te in T.BACKLASH_ENGAGE and 0 < b <= max(T.BACKLASH_B) + 0.002 and np.all(fit.theta >= 0)
     assert "engagement [s]" in T.term_parameters(fit, c.robot.joint_names)[f"backlash@{c.robot.joint_names[1]}"]
+    # the candidate's refit keeps the better of the two backlash variants by the information criterion
+    loaded = T.fit_loaded_backlash((), 0.0, 1, [s])
+    rows = s.tau.size
+    bic = lambda f: rows * np.log(f.cost) + f.terms[-1].n_params * np.log(rows)
+    chosen = T.fit_with((), 0.0, T.Term("backlash", 1), [s])
+    assert chosen.cost == min((fit, loaded), key=bic).cost
+
+
+def test_loaded_backlash_columns_are_the_link_lag_to_first_order(rotor_case):
+    """The loaded-gear backlash: the link lags the motor-side angle by tau_j/k + b sgn(tau_j); its
+    two columns are the rigid torques' change per unit 1/k and per unit b (finite differences of
+    RNEA along that lag, with the same smoothed sign and its rates)."""
+    import jax
+
+    c = load_case(rotor_case)
+    s = T.torque_set(c.robot, c.split("train")[0])
+    j, w = 1, 0.02
+    cols = T.Term("backlash", j, (T.LOADED, w)).columns(s)
+    assert cols.shape == s.q.shape + (2,)
+    np.testing.assert_allclose(cols[:, :, 0], T.compliance_column(s, j), rtol=0, atol=0)
+    tj = T.smooth_torque(s)[:, j]
+    sg = np.tanh(tj / (w * tj.std()))
+    sd = np.gradient(sg, s.t)
+    lag = [sg, sd, np.gradient(sd, s.t)]
+    rnea = jax.vmap(jflex.rnea, in_axes=(None, 0, 0, 0))
+    eps = 1e-6
+    moved = [a.copy() for a in (s.q, s.qd, s.qdd)]
+    for a, d in zip(moved, lag):
+        a[:, j] -= eps * d
+    fd = (np.asarray(rnea(c.robot, *moved)) - np.asarray(rnea(c.robot, s.q, s.qd, s.qdd))) / eps
+    scale = np.abs(cols[:, :, 1]).max()
+    assert scale > 0
+    np.testing.assert_allclose(cols[:, :, 1], fd, rtol=0, atol=1e-4 * scale)
+    fit = T.fit_loaded_backlash((), 0.0, j, [s])
+    assert fit.terms[-1].hyper[1] in T.BACKLASH_SIGN_WIDTHS and np.all(fit.theta >= 0)
+    names = T.term_parameters(fit, c.robot.joint_names)[f"backlash@{c.robot.joint_names[j]}"]
+    assert set(names) == {"compliance 1/k [rad/(N m)]", "b [rad]", "sign width [x std(tau)]"}
 
 
 def test_cli_diagnose_writes_run_folder(rotor_case, tmp_path):

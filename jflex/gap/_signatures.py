@@ -37,8 +37,9 @@ def signatures(problem: Problem, state: State, cands) -> dict:
             if c.effect == "sensor_delay":
                 cols = (np.gradient(T.predict(state.tfit, s), s.t, axis=0) / s.scale)[:, :, None]
             else:
-                h = {"stribeck_friction": T.STRIBECK_VS[1], "backlash": 0.01}.get(c.effect)
-                cols = T.term_columns(T.Term(c.effect, c.joint, h), s) / s.scale[None, :, None]
+                hs = {"stribeck_friction": [T.STRIBECK_VS[1]], "backlash": [0.01, (T.LOADED, 0.01)]}.get(c.effect, [None])
+                cols = np.concatenate([T.term_columns(T.Term(c.effect, c.joint, h), s) for h in hs], axis=2)
+                cols = cols / s.scale[None, :, None]
             for k in range(cols.shape[2]):
                 v = cols[:, :, k].ravel()
                 nv = np.linalg.norm(v)
@@ -51,7 +52,7 @@ def signatures(problem: Problem, state: State, cands) -> dict:
 SIGNATURE_NAMES = {
     "viscous_friction": "correlation with joint velocity", "coulomb_friction": "correlation with sign of velocity",
     "stribeck_friction": "sign of velocity, larger at low speed", "rotor_inertia": "correlation with joint acceleration",
-    "gravity_compensator": "posture harmonics of the joint angle", "backlash": "dead zone at reversals (held sign x gravity stiffness)",
+    "gravity_compensator": "posture harmonics of the joint angle", "backlash": "dead zone at reversals of motion or of the transmitted torque",
     "payload": "tool-mass regressor columns", "sensor_delay": "phase lag: correlation with d tau/dt",
     "joint_flexibility": "extra FRF peak / unmatched mode; in torques, the link lagging under load (tau_j / k)", "orthogonal_compliance": "extra FRF peak / unmatched mode",
     "link_flexibility": "extra FRF peak / unmatched mode", "hysteretic_damping": "damping ratio flat in frequency",

@@ -196,6 +196,16 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
 BACKLASH_ENGAGE = (0.004, 0.008, 0.012)  # [s] grid of engagement smoothing (contact compliance) time constants
 BACKLASH_ENGAGE_FIRST = 0.008  # [s] the engagement time of the half-width grid search (and of a bare b)
 BACKLASH_PULSES = (0.004, 0.008, 0.016, 0.032)  # [s] widths of the engagement-impulse basis
+# a loaded gear with play: the link sits against the tooth face the transmitted torque pushes it
+# to and crosses the play when that torque changes sign; the sign is smoothed over this fraction
+# of the joint torque's standard deviation (the crossing's duration, unknown: a grid)
+BACKLASH_SIGN_WIDTHS = (0.005, 0.01, 0.02, 0.05)
+LOADED = "loaded"  # hyper-parameter tag of that variant: (LOADED, sign width)
+
+
+def is_loaded(h) -> bool:
+    """Whether a backlash hyper-parameter is the loaded-gear variant (see :func:`loaded_backlash_torque`)."""
+    return isinstance(h, tuple) and len(h) == 2 and h[0] == LOADED
 
 
 def backlash_hyper(h):
@@ -225,6 +235,28 @@ def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
             qdd[:, j] = np.gradient(first_order_zero_phase(qdl[:, j], s.t, w), s.t)
             cols.append(np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qdd))) - Fa)
         s.cache[key] = np.stack(cols, axis=2)
+    return s.cache[key]
+
+
+def loaded_backlash_torque(s: TorqueSet, j: int, width: float) -> np.ndarray:
+    """Columns (N, n, 2) of a loaded transmission with play at joint ``j``: the link lags the
+    motor-side angle by ``tau_j / k + b sgn(tau_j)`` (the spring's deflection plus the half-play on
+    the side the transmitted torque presses), ``theta = [1/k, b]``. To first order both are
+    RNEA's directional derivative along ``e_j`` times the deflection and its rates, as in
+    :func:`compliance_column`; ``sgn`` is ``tanh(tau_j / (width std(tau_j)))`` of the low-passed
+    measured torque. The kinematic play of :func:`backlash_torque` suits a link that no load
+    presses against a tooth face; a gravity- or inertia-loaded one crosses the play when its torque
+    reverses, and its gear's compliance comes with it."""
+    key = ("loaded_backlash", j, width)
+    if key not in s.cache:
+        tj = smooth_torque(s)[:, j]
+        sg = np.tanh(tj / (width * max(float(np.std(tj)), 1e-300)))
+        sd = np.gradient(sg, s.t)
+        d = [np.zeros_like(s.q) for _ in range(3)]
+        for k, v in enumerate((sg, sd, np.gradient(sd, s.t))):
+            d[k][:, j] = v
+        play_col = -np.asarray(_jvp_batch(s.robot, *[jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]))
+        s.cache[key] = np.stack([compliance_column(s, j), play_col], axis=2)
     return s.cache[key]
 
 
@@ -299,6 +331,8 @@ class Term:
 
     @property
     def n_params(self) -> int:
+        if self.effect == "backlash" and is_loaded(self.hyper):
+            return 2
         return {"stribeck_friction": 2, "gravity_compensator": 4, "payload": 10, "sensor_delay": 0, "joint_flexibility": 1,
                 "backlash": 1 + len(BACKLASH_PULSES)}.get(self.effect, 1)
 
@@ -308,6 +342,8 @@ class Term:
         return lo, [np.inf] * self.n_params
 
     def param_names(self):
+        if self.effect == "backlash" and is_loaded(self.hyper):
+            return ["compliance 1/k [rad/(N m)]", "b [rad]"]
         return {
             "viscous_friction": ["Fv [N m s/rad]"], "coulomb_friction": ["Fc [N m]"],
             "stribeck_friction": ["Fc [N m]", "Fs-Fc [N m]"], "rotor_inertia": ["Ia [kg m^2]"],
@@ -337,6 +373,8 @@ class Term:
                 out[:, :, 0] += out[:, :, 1]  # [Fc, Fs] -> [Fc, Fs - Fc]
         elif e == "joint_flexibility":
             out[:, :, 0] = compliance_column(s, j)
+        elif e == "backlash" and is_loaded(self.hyper):
+            out[:, :, :] = loaded_backlash_torque(s, j, self.hyper[1])
         elif e == "backlash":
             # motor-side encoder; the link follows through the play (hyper = (half-width, engagement))
             out[:, :, :] = backlash_torque(s, j, self.hyper)
@@ -478,22 +516,38 @@ def fit_with(base_terms, base_delay, new: Term | None, sets, inertia=None) -> To
         best = min(fits, key=lambda f: f.cost)
         return dataclasses.replace(best, terms=best.terms + (Term("sensor_delay", None, best.delay),))
     if new.effect == "backlash":
-        # play half-width on a grid (engagement BACKLASH_ENGAGE_FIRST), the engagement time on its grid, then the
-        # half-width refined around the best
-        fit = lambda h: fit_terms(tuple(base_terms) + (Term("backlash", new.joint, h),), base_delay, sets, inertia)
-        best = min((fit((b, BACKLASH_ENGAGE_FIRST)) for b in BACKLASH_B), key=lambda f: f.cost)
-        b = best.terms[-1].hyper[0]
-        best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != BACKLASH_ENGAGE_FIRST], key=lambda f: f.cost)
-        te = best.terms[-1].hyper[1]
-        for step in (0.00125, 0.000625):
-            best = min([best] + [fit((b + d, te)) for d in (-step, step) if b + d > 0], key=lambda f: f.cost)
-            b = best.terms[-1].hyper[0]
-        return best
+        # the kinematic play and the loaded gear free different numbers of coefficients: the better
+        # of the two by the information criterion
+        rows = sum(s.tau.size for s in sets)
+        bic = lambda f: rows * np.log(max(f.cost, 1e-300)) + f.terms[-1].n_params * np.log(rows)
+        return min((fit_play_backlash(base_terms, base_delay, new.joint, sets, inertia),
+                    fit_loaded_backlash(base_terms, base_delay, new.joint, sets, inertia)), key=bic)
     grid = {"stribeck_friction": STRIBECK_VS}.get(new.effect)
     if grid is not None:
         fits = [fit_terms(tuple(base_terms) + (Term(new.effect, new.joint, v),), base_delay, sets, inertia) for v in grid]
         return min(fits, key=lambda f: f.cost)
     return fit_terms(tuple(base_terms) + (new,), base_delay, sets, inertia)
+
+
+def fit_play_backlash(base_terms, base_delay, j, sets, inertia=None) -> TorqueFit:
+    """Kinematic play at joint ``j`` (:func:`backlash_torque`): the half-width on a grid (engagement
+    BACKLASH_ENGAGE_FIRST), the engagement time on its grid, then the half-width refined around the best."""
+    fit = lambda h: fit_terms(tuple(base_terms) + (Term("backlash", j, h),), base_delay, sets, inertia)
+    best = min((fit((b, BACKLASH_ENGAGE_FIRST)) for b in BACKLASH_B), key=lambda f: f.cost)
+    b = best.terms[-1].hyper[0]
+    best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != BACKLASH_ENGAGE_FIRST], key=lambda f: f.cost)
+    te = best.terms[-1].hyper[1]
+    for step in (0.00125, 0.000625):
+        best = min([best] + [fit((b + d, te)) for d in (-step, step) if b + d > 0], key=lambda f: f.cost)
+        b = best.terms[-1].hyper[0]
+    return best
+
+
+def fit_loaded_backlash(base_terms, base_delay, j, sets, inertia=None) -> TorqueFit:
+    """A loaded gear with play at joint ``j`` (:func:`loaded_backlash_torque`), its sign width on a grid."""
+    fits = (fit_terms(tuple(base_terms) + (Term("backlash", j, (LOADED, w)),), base_delay, sets, inertia)
+            for w in BACKLASH_SIGN_WIDTHS)
+    return min(fits, key=lambda f: f.cost)
 
 
 def term_parameters(fit: TorqueFit, joint_names) -> dict:
@@ -506,7 +560,9 @@ def term_parameters(fit: TorqueFit, joint_names) -> dict:
             d["vs [rad/s]"] = float(t.hyper)
         if t.effect == "sensor_delay":
             d["delay [s]"] = float(t.hyper)
-        if t.effect == "backlash":
+        if t.effect == "backlash" and is_loaded(t.hyper):
+            d["sign width [x std(tau)]"] = float(t.hyper[1])
+        elif t.effect == "backlash":
             b, te = backlash_hyper(t.hyper)
             d["b [rad]"], d["engagement [s]"] = b, te
         out[t.label(joint_names)] = d
