@@ -132,18 +132,32 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
     - ``first``: optional ``{cand: (state, ev)}`` of first-round refits already made.
     - ``on_select(step)``: optional callback after each selected step.
     - ``min_first_shrink``: the first effect must close at least this % of the excess to be taken
-      (stop reason ``"weak"``): below it, nothing is named and no further round is searched. A
-      number, or ``callable(step) -> number`` (e.g. lower for an effect that supplies a measured
-      mode the model lacked).
+      (stop reason ``"weak"``): below it, nothing is named. A number, or ``callable(step) ->
+      number`` (e.g. lower for an effect that supplies a measured mode the model lacked). A first
+      effect below it whose held-out score is still :data:`DECISIVE_SCORE` is kept on probation:
+      the search goes on with decisive steps only, and the effects are named if together they
+      close that share (two real effects that each explain part of one gap), else none is.
     - ``significant``: whether the nominal gap is significant (default: :func:`is_significant`),
       e.g. also when a candidate is :func:`decisive` evidence.
     """
     if not (is_significant(ev0, floor) if significant is None else significant):
         return Selection([], state0, ev0, "not significant")
     steps, state, ev_cur, chosen = [], state0, ev0, []
+    _, _, exc0 = gap_summary(ev0, floor)
+    weak = None  # (first step, share it had to close) while a decisive but partial first effect is on probation
+
+    def on_probation(stop):
+        # the effects taken since a decisive first step that closed too little must close the share
+        # together, else none is named (two real effects each closing part of one gap are named;
+        # a lone partial match to an effect outside the library is not)
+        _, _, exc = gap_summary(ev_cur, floor)
+        if 100 * (1 - exc / exc0) >= weak[1]:
+            return Selection(steps, state, ev_cur, stop)
+        return Selection([], state0, ev0, "weak", weak[0])
+
     while True:
         if len(steps) >= max_effects:
-            return Selection(steps, state, ev_cur, "max effects")
+            return on_probation("max effects") if weak else Selection(steps, state, ev_cur, "max effects")
         _, _, exc_cur = gap_summary(ev_cur, floor)
         pool = candidates(state, len(steps)) if callable(candidates) else candidates
         best = None
@@ -163,18 +177,30 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             if best is None or key > best[0]:
                 best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink)))
         if best is None:
-            return Selection(steps, state, ev_cur, "no candidate")
+            return on_probation("no candidate") if weak else Selection(steps, state, ev_cur, "no candidate")
         step = best[1]
+        if weak and step.score < DECISIVE_SCORE:
+            return on_probation("too small")
         if step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK:
             return Selection(steps, state, ev_cur, "too small", step)
         need = min_first_shrink(step) if callable(min_first_shrink) else min_first_shrink
         if not steps and step.step_shrink < need:
-            return Selection(steps, state, ev_cur, "weak", step)
+            if step.score < DECISIVE_SCORE:
+                return Selection(steps, state, ev_cur, "weak", step)
+            weak = (step, need)
         steps.append(step)
         chosen.append(step.cand)
         state, ev_cur = step.state, step.ev
-        if on_select is not None:
-            on_select(step)
+        new = [step]
+        if weak:
+            _, _, exc = gap_summary(ev_cur, floor)
+            if 100 * (1 - exc / exc0) < weak[1]:
+                if not is_significant(ev_cur, floor):
+                    return on_probation("within noise")
+                continue
+            weak, new = None, steps
+        for st_ in new if on_select is not None else ():
+            on_select(st_)
         if not is_significant(ev_cur, floor):
             return Selection(steps, state, ev_cur, "within noise")
 
