@@ -33,7 +33,7 @@ import jax.numpy as jnp
 from . import _scalar as s
 from ._checks import checked_arrays as _checked, has_inertia
 from ._robot import PRISMATIC, Robot
-from ._tree import consts, walk
+from ._tree import consts, transform
 
 
 def _dtype():
@@ -61,12 +61,15 @@ def _world_pass(robot: Robot, c, q, qd, qdd, f_ext):
     """Per body, in base axes about the base origin: motion axis S, velocity V, acceleration A
     (gravity as a base acceleration), inertia Y, its rate Ydot, momentum h and force F."""
     n = robot.nq
-    ls = walk(robot, c, q, world=True)
     a0 = (s.ZERO, -c.gravity)
-    S, V, A, Y, Yd, h, F = ([None] * n for _ in range(7))
+    S, V, A, Y, Yd, h, F, P = ([None] * n for _ in range(8))
     for i in range(n):
         par = robot.parents[i]
-        oR, op = ls.oR[i], ls.op[i]
+        # placements composed here, not by _tree.walk, whose world placements carry no fence: every
+        # consumer would recompute the chain of rotations (measured: 70 sines per sine)
+        R, p = transform(robot, c, i, q[i])
+        oR, op = (R, p) if par < 0 else (P[par][0].mm(R), P[par][1] + P[par][0].mv(p))
+        oR, op = P[i] = s.barrier(oR, op, fence=c.fence)
         ax = oR.mv(c.axis[i])
         S[i] = (s.ZERO, ax) if robot.joint_types[i] == PRISMATIC else (ax, s.cross(op, ax))
         Vp, Ap = ((s.ZERO, s.ZERO), a0) if par < 0 else (V[par], A[par])
