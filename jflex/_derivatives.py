@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 
 from . import _scalar as s
-from ._checks import checked_arrays as _checked, has_inertia
+from ._checks import checked_arrays as _checked, guard, has_inertia, moving_inertia
 from ._robot import PRISMATIC, Robot
 from ._tree import consts, transform
 
@@ -112,8 +112,22 @@ def _fence6(fence, *objs):
     return out
 
 
-def _kernel(robot: Robot, q, qd, qdd, f_ext):
-    """(dtau_dq, dtau_dqd, M) as nested lists of scalars."""
+def _subtree_sums(robot, c, *per_body):
+    """Subtree sums of per-body quantities (world frame: no transforms)."""
+    out = [list(x) for x in per_body]
+    for i in reversed(range(robot.nq)):
+        par = robot.parents[i]
+        if par >= 0:
+            vals = [x[par] + x[i] if isinstance(x[i], s.Inertia) else _add6(x[par], x[i]) for x in out]
+            for x, v in zip(out, _fence6(c.fence, *vals)):
+                x[par] = v
+    return out
+
+
+def _kernel(robot: Robot, q, qd, qdd, f_ext, tau=None):
+    """(dtau_dq, dtau_dqd, M, L, fence) as nested lists of scalars (fence: see _scalar.barrier). With ``tau`` given (and ``qdd=None``)
+    the accelerations are first solved from ``M qdd = tau - h`` on the same pass, and ``L`` is the
+    Cholesky factor of M (else None)."""
     n = robot.nq
     c = consts(robot)
     if c.fence is None and isinstance(q, jax.core.Tracer):  # compiled, not run op by op
@@ -124,19 +138,31 @@ def _kernel(robot: Robot, q, qd, qdd, f_ext):
         from equinox.internal import unvmap_any
 
         c = c._replace(fence=unvmap_any(jnp.isnan(q[0])))
-    S, V, A, Y, Yd, h, F = _world_pass(robot, c, q, qd, qdd, f_ext)
-    # subtree sums (world frame: no transforms)
-    Yc, Ydc, hc, Fc = list(Y), list(Yd), list(h), list(F)
-    for i in reversed(range(n)):
-        par = robot.parents[i]
-        if par >= 0:
-            Yc[par], Ydc[par] = Yc[par] + Yc[i], Ydc[par] + Ydc[i]
-            hc[par], Fc[par] = _add6(hc[par], hc[i]), _add6(Fc[par], Fc[i])
-            Yc[par], Ydc[par], hc[par], Fc[par] = _fence6(c.fence, Yc[par], Ydc[par], hc[par], Fc[par])
+    S, V, A, Y, Yd, h, F = _world_pass(robot, c, q, qd, [0.0] * n if tau is not None else qdd, f_ext)
+    Yc, Ydc, hc, Fc = _subtree_sums(robot, c, Y, Yd, h, F)
+    Ag = [_fence6(c.fence, Yc[j].apply(*S[j]))[0] for j in range(n)]
+    M = [[0.0] * n for _ in range(n)]
+    for i in range(n):
+        j = i
+        while j >= 0:
+            M[i][j] = M[j][i] = _dot6(Ag[i], S[j])
+            j = robot.parents[j]
+    L = None
+    if tau is not None:
+        L = _cholesky(M, c.fence)
+        # qdd = M^-1 (tau - h); the bodies' accelerations and forces then move by S qdd
+        qdd = [x[0] for x in _cholesky_solve(L, [[s.sub(tau[i], _dot6(Fc[i], S[i]))] for i in range(n)], c.fence)]
+        dA = [None] * n
+        for i in range(n):
+            par = robot.parents[i]
+            Sq = (S[i][0].scale(qdd[i]), S[i][1].scale(qdd[i]))
+            dA[i] = Sq if par < 0 else _add6(dA[par], Sq)
+            dA[i], A[i], F[i] = _fence6(c.fence, dA[i], _add6(A[i], dA[i]), _add6(F[i], Y[i].apply(*dA[i])))
+        (Fc,) = _subtree_sums(robot, c, F)
     a0 = (s.ZERO, -c.gravity)
     # per joint j: e_j, c_j; the rows' vectors Ag_i = Yc_i S_i, G_i = Dc_i^T S_i; the columns'
     # subtree force changes dFq_j, dFv_j (for strict ancestors)
-    Ag, G, e, cj, dFq, dFv = ([None] * n for _ in range(6))
+    G, e, cj, dFq, dFv = ([None] * n for _ in range(5))
     for j in range(n):
         par = robot.parents[j]
         Sj = S[j]
@@ -147,7 +173,6 @@ def _kernel(robot: Robot, q, qd, qdd, f_ext):
             e[j] = s.cross_motion(*V[par], *Sj)
             cj[j] = _add6(s.cross_motion(*A[par], *Sj), s.cross_motion(*V[par], *e[j]))
         e[j], cj[j] = _fence6(c.fence, e[j], cj[j])
-        Ag[j] = Yc[j].apply(*Sj)
         # Dc^T S = Ydot_c S - S x* hc  (Ydot symmetric; the transpose of x -> x x* h is -(. x* h))
         yS, xS = _fence6(c.fence, Ydc[j].apply(*Sj), s.cross_force(*Sj, *hc[j]))
         G[j] = (yS[0] - xS[0], yS[1] - xS[1])
@@ -157,21 +182,19 @@ def _kernel(robot: Robot, q, qd, qdd, f_ext):
         Yce = Yc[j].apply(*e[j])
         dFq[j] = _add6(_add6(Yc[j].apply(*cj[j]), De), s.cross_force(*Sj, *Fc[j]))
         dFv[j] = _add6((Yce[0].scale(2.0), Yce[1].scale(2.0)), DS)
-        Ag[j], G[j], dFq[j], dFv[j] = _fence6(c.fence, Ag[j], G[j], dFq[j], dFv[j])
+        G[j], dFq[j], dFv[j] = _fence6(c.fence, G[j], dFq[j], dFv[j])
     dq = [[0.0] * n for _ in range(n)]
     dv = [[0.0] * n for _ in range(n)]
-    M = [[0.0] * n for _ in range(n)]
     for i in range(n):
         j = i
         while j >= 0:  # j: i and its ancestors
             dq[i][j] = s.add(_dot6(Ag[i], cj[j]), _dot6(G[i], e[j]))
             dv[i][j] = s.add(s.mul(2.0, _dot6(Ag[i], e[j])), _dot6(G[i], S[j]))
-            M[i][j] = M[j][i] = _dot6(Ag[i], S[j])
             if j != i:
                 dq[j][i] = _dot6(dFq[i], S[j])
                 dv[j][i] = _dot6(dFv[i], S[j])
             j = robot.parents[j]
-    return dq, dv, M
+    return dq, dv, M, L, c.fence
 
 
 def _matrix(rows, dtype):
@@ -194,57 +217,70 @@ def rnea_derivatives(robot: Robot, q, qd, qdd, f_ext=None):
     """
     has_inertia("rnea_derivatives", robot)
     q, qd, qdd, f_ext = _checked("rnea_derivatives", robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
-    dq, dv, M = _kernel(robot, q, qd, qdd, f_ext)
+    dq, dv, M, _, _ = _kernel(robot, q, qd, qdd, f_ext)
     dt = _dtype()
     return _matrix(dq, dt), _matrix(dv, dt), _matrix(M, dt)
 
 
-def _cholesky_solve(M, B):
-    """M^-1 B for symmetric positive definite M (n x n) and B (n x m), nested lists of scalars:
-    an unrolled Cholesky factorisation and two triangular solves, so that under vmap every step is
-    one elementwise pass over the batch (no batched LAPACK calls on tiny matrices)."""
-    n, m = len(M), len(B[0])
+def _cholesky(M, fence=None):
+    """Lower Cholesky factor of a symmetric positive definite M (nested lists of scalars), unrolled
+    so that under vmap every step is one elementwise pass over the batch (no batched LAPACK calls
+    on tiny matrices). Not positive definite: NaN on the diagonal from the failing pivot on."""
+    n = len(M)
     L = [[0.0] * n for _ in range(n)]
     for j in range(n):
-        d = s.sub(M[j][j], s.sum_(*(s.mul(L[j][k], L[j][k]) for k in range(j))))
-        L[j][j] = jnp.sqrt(d)
+        L[j][j] = jnp.sqrt(s.sub(M[j][j], s.sum_(*(s.mul(L[j][k], L[j][k]) for k in range(j)))))
         inv = 1.0 / L[j][j]
         for i in range(j + 1, n):
             L[i][j] = s.mul(s.sub(M[i][j], s.sum_(*(s.mul(L[i][k], L[j][k]) for k in range(j)))), inv)
+        # a fence per column: later columns read every entry (see _kernel on fusion)
+        col = s.barrier(*(L[i][j] for i in range(j, n)), fence=fence)
+        for i in range(j, n):
+            L[i][j] = col[i - j]
+    return L
+
+
+def _cholesky_solve(L, B, fence=None):
+    """M^-1 B from the Cholesky factor L of M, for B (n x m) nested lists of scalars."""
+    n, m = len(L), len(B[0])
+    inv = [1.0 / L[i][i] for i in range(n)]
     Y = [[None] * m for _ in range(n)]
     for i in range(n):
-        inv = 1.0 / L[i][i]
         for c in range(m):
-            Y[i][c] = s.mul(s.sub(B[i][c], s.sum_(*(s.mul(L[i][k], Y[k][c]) for k in range(i)))), inv)
+            Y[i][c] = s.mul(s.sub(B[i][c], s.sum_(*(s.mul(L[i][k], Y[k][c]) for k in range(i)))), inv[i])
+        Y[i] = list(s.barrier(*Y[i], fence=fence))
     X = [[None] * m for _ in range(n)]
     for i in reversed(range(n)):
-        inv = 1.0 / L[i][i]
         for c in range(m):
-            X[i][c] = s.mul(s.sub(Y[i][c], s.sum_(*(s.mul(L[k][i], X[k][c]) for k in range(i + 1, n)))), inv)
+            X[i][c] = s.mul(s.sub(Y[i][c], s.sum_(*(s.mul(L[k][i], X[k][c]) for k in range(i + 1, n)))), inv[i])
+        X[i] = list(s.barrier(*X[i], fence=fence))
     return X
 
 
 def aba_derivatives(robot: Robot, q, qd, tau, f_ext=None):
     """Partial derivatives of forward dynamics :func:`jflex.aba` (as Pinocchio's
-    ``computeABADerivatives``): ``qdd = M^-1 (tau - h)`` differentiated through
-    ``d qdd = -M^-1 (d tau_rnea)`` at ``qdd``.
+    ``computeABADerivatives``): ``qdd = M^-1 (tau - h)`` is solved on the same pass, then
+    ``d qdd = -M^-1 d tau_rnea`` at that ``qdd``.
 
     **Arguments:** ``q``, ``qd``, ``tau`` (n,) joint positions, velocities and torques/forces;
     ``f_ext`` optional (n, 6) as in :func:`rnea_derivatives`.
 
     **Returns:** ``(dqdd_dq, dqdd_dqd, dqdd_dtau)``, each (n, n); ``dqdd_dtau`` is ``M(q)^-1``.
 
-    Raises like :func:`jflex.aba` (a joint that moves no inertia: :class:`jflex.ParameterError`).
+    Raises like :func:`jflex.aba`: :class:`jflex.DataError` for NaN/inf arguments,
+    :class:`jflex.ParameterError` for a joint that moves no inertia (a singular mass matrix; at run
+    time inside ``jit``).
     """
-    from ._dynamics import aba
-
-    qdd = aba(robot, q, qd, tau, f_ext=f_ext)
-    q, qd, f_ext = _checked("aba_derivatives", robot, q=q, qd=qd, f_ext=f_ext)
+    fn = "aba_derivatives"
+    moving_inertia(fn, robot)
+    q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
     n = robot.nq
-    dq, dv, M = _kernel(robot, q, qd, qdd, f_ext)
+    dq, dv, M, L, fence = _kernel(robot, q, qd, None, f_ext, tau=tau)
     B = [[1.0 if c == i else 0.0 for c in range(n)] + [s.mul(-1.0, x) for x in dq[i]] + [s.mul(-1.0, x) for x in dv[i]]
          for i in range(n)]
-    X = _cholesky_solve(M, B)
+    X = _cholesky_solve(L, B, fence)
     dt = _dtype()
-    cols = lambda k: _matrix([row[k * n : (k + 1) * n] for row in X], dt)
-    return cols(1), cols(2), cols(0)
+    out = jnp.stack([_matrix([row[k * n : (k + 1) * n] for row in X], dt) for k in (1, 2, 0)])
+    out = guard(out, [~jnp.all(jnp.isfinite(s.stack([L[i][i] for i in range(n)], dt)))], [
+        f"{fn}: the mass matrix is not positive definite (a joint moves no inertia?); check robot.inertia"])
+    return out[0], out[1], out[2]
