@@ -6,6 +6,12 @@ faster). Pinocchio is called in a Python loop, one state at a time, as a user wo
 jflex is timed after warm-up with ``block_until_ready``; compile times are reported separately.
 The arm is the 7-joint Panda of example-robot-data (fingers locked at zero).
 
+``--section derivatives`` runs only the section of issue 14: ``jflex.rnea_derivatives`` and
+``jflex.aba_derivatives`` against Pinocchio's ``computeRNEADerivatives``/``computeABADerivatives``
+in a Python loop (Pinocchio 4.1 has no multi-threaded derivatives batch), and batched ``rnea``/``aba``
+against Pinocchio's ``rneaInParallel``/``abaInParallel`` on ``--threads`` threads (default 2), at
+``--deriv-batches`` (default 1e3 and 1e5). The default ``--section all`` runs it after the table.
+
 ``--malloc hugetlb`` (the default) re-runs the script with ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1``
 so that glibc backs its large mmapped blocks with transparent huge pages. Both libraries run in
 that same process. The setting matters for jflex at batch 1e5: each call returns one fresh
@@ -308,7 +314,7 @@ def pinocchio_batches():
 
 
 def bench_derivatives(robot, model, batches, algorithms, threads=2):
-    """Per state: jflex batched (``jit(vmap)``; RNEA and ABA as in ``bench_jflex``) against
+    """Per state: jflex batched (``jflex.batched``; RNEA and ABA as in ``bench_jflex``) against
     Pinocchio called one state at a time in a Python loop and, where this build has one, its
     ``*InParallel`` batch on ``threads`` threads (a ModelPool). Results are checked on the first
     ``CHECK`` states (the parallel batch on all of them) before any timing is reported."""
@@ -328,9 +334,11 @@ def bench_derivatives(robot, model, batches, algorithms, threads=2):
         for name in algorithms:
             jfn, pfn, par = DERIV_ALGORITHMS[name]
             f = lambda a, b, c, d, jfn=jfn: jfn(robot, a, b, c, d)
-            # the derivative kernels run fused: XLA:CPU without fusion (jax 0.10.2) returned wrong
-            # dtau/dqd and M for them (the check below caught it)
-            jf = jax.jit(jax.vmap(f)) if "derivatives" in name else jflex.batched(f, batch_size=min(N, 4096), fuse=False)
+            # the derivative kernels run fused, in lax.map blocks of 1024 states (cache-sized; one
+            # vmapped program over 1e5 states was 1.6x slower): XLA:CPU without fusion (jax 0.10.2)
+            # returned wrong dtau/dqd and M for them (the check below caught it)
+            jf = (jflex.batched(f, batch_size=min(N, 1024)) if "derivatives" in name
+                  else jflex.batched(f, batch_size=min(N, 4096), fuse=False))
             t0 = time.perf_counter()
             out = jax.block_until_ready(jf(q, qd, qdd, tau))
             compile_s = time.perf_counter() - t0
