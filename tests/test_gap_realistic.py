@@ -208,3 +208,38 @@ def test_frf_nominal_identification_corrects_cad_inertias(tmp_path):
     m_fit, c_fit = P[0], P[1:4] / P[0]
     assert abs(m_fit - last["mass_true"]) < abs(last["mass_cad"] - last["mass_true"])
     assert np.linalg.norm(c_fit - last["com_true"]) < np.linalg.norm(np.subtract(last["com_cad"], last["com_true"]))
+
+
+def test_modal_null_case_within_the_cad_tolerance_raises_no_alarm(tmp_path):
+    # modal tables (3 modes at 3 postures, 1 % frequency noise) of a 3-joint arm whose CAD masses
+    # and COMs are a few per cent / 1-2 cm off, nothing planted: the tables cannot identify the
+    # inertias, no candidate closes the gap, and the gap is within the spread the CAD tolerance
+    # gives: no alarm. The spread is the first-order one, checked against sampled CAD errors.
+    from independent import make_case
+
+    from jflex.gap import load_case
+    from jflex.gap._frequency_inertia import _Shifted, cad_spread
+    from jflex.gap import _linear as L
+    from jflex.gap._problem import Problem
+
+    folder, _ = make_case(tmp_path / "modal_null", kind="modal", robot="arm3", effects=(), seed=8000 + 17 * 35)
+    r = diagnose(folder).result
+    assert r["verdict"] == "within_noise" and r["selected"] == [], (r["gap_before"], r["noise_floor"], r["stop_reason"])
+    assert r["gap_before"] > 1.2 * r["noise_floor"] + 0.2  # above the measurement noise alone
+    assert r["cad_spread"] and "CAD inertias' tolerance" in r["stop_reason"]
+    pb = Problem(load_case(folder))
+    nom = pb.nominal_state()
+    prior = pb.lin_inertia["prior"]
+    spread = cad_spread(nom.lm, nom.x, pb.fval, prior)
+    d = pb.fval[0]
+    sh = _Shifted(nom.lm)
+    r0 = L.residual(sh, nom.x, [d], peaks=False)
+    rng = np.random.default_rng(0)
+    eps, draws = 0.01, []
+    free = prior.scale > 0
+    for _ in range(300):
+        sh.delta = eps * prior.scale * rng.standard_normal(prior.scale.size) * free
+        e = L.residual(sh, nom.x, [d], peaks=False) - r0
+        draws.append(e @ e / eps**2)
+    mc = np.sqrt(np.mean(draws)) * 100
+    assert spread[d.name] == pytest.approx(mc, rel=0.15)
