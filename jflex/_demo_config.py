@@ -38,7 +38,7 @@ class GridConfig(Strict):
 
 
 class DemoConfig(Strict):
-    robot: str = Field("staubli_tx200", description="a robot config name (configs/robots) or URDF")
+    robot: str = Field("case", description="'case': the diagnosed robot; or a robot config name (configs/robots) or URDF")
     links: Annotated[list[LinkInertial], Field(min_length=1)] | None = Field(
         None, description="link inertials replacing the robot config's")
     grid: GridConfig = Field(default_factory=GridConfig)

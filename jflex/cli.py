@@ -97,8 +97,10 @@ def cmd_info(args) -> int:
     return 0
 
 
-def run_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
-    """Gravity torques and mass-matrix conditioning over a (q2, q3) grid of the demo arm."""
+def run_demo(cfg: dict, run_dir: pathlib.Path, case_robot=None) -> dict:
+    """Gravity torques and mass-matrix conditioning over a (q2, q3) grid: of ``case_robot``
+    (``(name, Robot)``, the robot the demo diagnosed) when the config's ``robot`` is ``case``, else
+    of the named robot."""
     import jax
     import matplotlib
 
@@ -108,15 +110,21 @@ def run_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
     from . import _dynamics as dyn
     from ._sweep import sweep
 
-    spec = cfg.get("robot", "staubli_tx200")
+    spec = cfg.get("robot", "case")
     robot_cfg = None
-    for d in config_dirs():
+    if spec == "case":
+        if case_robot is None:
+            raise JFlexError("demo: robot 'case' maps the robot of the diagnosed case; pass a robot config name or URDF")
+        spec = f"{case_robot[0]} (the robot diagnosed, CAD inertias)"
+    for d in config_dirs() if case_robot is None else ():
         if (d / f"{spec}.yaml").is_file():
             robot_cfg = load_yaml(d / f"{spec}.yaml")
             break
     if robot_cfg is not None and "links" in cfg:
         robot_cfg["links"] = cfg["links"]
         robot = robot_from_config(robot_cfg, where=f"demo robot '{spec}'")
+    elif case_robot is not None:
+        robot = case_robot[1]
     else:
         robot = load_robot(spec)
     g = cfg.get("grid", {})
@@ -186,7 +194,8 @@ def _run(name, default, fn, args, schema=None) -> int:
 
 def run_gap_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
     """The main job: diagnose the built-in case (a 3-joint arm whose data hide a payload and
-    Coulomb friction), then the rigid posture maps of ``configs/demo.yaml`` beside it."""
+    Coulomb friction), then rigid posture maps beside it: of the diagnosed robot (``robot: case``,
+    the default of ``configs/demo.yaml``) or of the robot the config names."""
     import json
 
     from .gap import demo as gap_demo
@@ -195,7 +204,15 @@ def run_gap_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
     diag = json.loads((run_dir / "diagnosis.json").read_text())
     rigid_dir = run_dir / "rigid_maps"
     rigid_dir.mkdir(exist_ok=True)
-    rigid = run_demo(cfg, rigid_dir)
+    from .gap import load_case
+
+    case_robot = None
+    if cfg.get("robot", "case") == "case":
+        case_dir = run_dir / "case"
+        rfile = case_dir / load_yaml(case_dir / "case.yaml")["robot"]
+        name = load_yaml(rfile).get("name", rfile.stem) if rfile.suffix in (".yaml", ".yml") else rfile.stem
+        case_robot = (name, load_case(case_dir).robot)
+    rigid = run_demo(cfg, rigid_dir, case_robot)
     print(f"\ndiagnosis report: {report}")
     return {
         "report": str(report),

@@ -33,7 +33,7 @@ EXPERIMENTS = {
     "identify_synthetic": ("IdentifySyntheticConfig", ["identify_synthetic.yaml"],
                            ("flexible_joints", "stiffness_N_m_per_rad", 1), ("rigid_friction", "compensator_N_m", 0)),
     # not an experiment script: `jflex demo` (jflex/cli.py) reads configs/demo.yaml
-    "demo": ("DemoConfig", ["demo.yaml"], ("links", 1, "mass"), ("grid", "q2_deg", 0)),
+    "demo": ("DemoConfig", ["demo.yaml"], None, ("grid", "q2_deg", 0)),
     "press_bdc": ("PressBdcConfig", ["press.yaml"], ("press", "main_mass"), ("press", "crank_pivot", 0)),
 }
 
@@ -117,6 +117,15 @@ def test_negative_physical_number_refused(name):
 def test_string_or_non_finite_number_refused(name, bad):
     path = EXPERIMENTS[name][3]
     _refused(name, lambda c: _set(c, path, bad), field_path(path))
+
+
+def test_demo_links_of_a_named_robot_are_checked():
+    from jflex._demo_config import DemoConfig
+
+    cfg = {"robot": "staubli_tx200", "links": [{"mass": 250.0, "com": [0, 0, -0.15], "inertia": [12, 0, 12, 0, 0, 9]},
+                                               {"mass": -1.0, "com": [0.45, 0, 0.2], "inertia": [3, 0, 14, 0, 0, 14]}]}
+    with pytest.raises(jflex.ConfigError, match=r"field 'links\[1\]\.mass'"):
+        validate(DemoConfig, cfg, "demo.yaml")
 
 
 def test_exponent_without_sign_is_a_number(tmp_path):

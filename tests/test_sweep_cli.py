@@ -76,6 +76,8 @@ def test_cli_info_and_demo(tmp_path):
     assert main(["demo", str(cfg), "--out", str(out)]) == 0
     res = json.loads((out / "results.json").read_text())
     assert res and all((out / p).exists() for p in res.get("plots", []))
+    # the rigid maps are of the robot diagnosed (the demo case's 3-joint arm), not another one
+    assert res["rigid_maps"]["robot"].startswith("arm3") and "diagnosed" in res["rigid_maps"]["robot"]
 
 
 def test_cli_reports_bad_robot_cleanly(capsys):
