@@ -251,13 +251,19 @@ def loaded_backlash_torque(s: TorqueSet, j: int, width: float) -> np.ndarray:
     if key not in s.cache:
         tj = smooth_torque(s)[:, j]
         sg = np.tanh(tj / (width * max(float(np.std(tj)), 1e-300)))
-        sd = np.gradient(sg, s.t)
-        d = [np.zeros_like(s.q) for _ in range(3)]
-        for k, v in enumerate((sg, sd, np.gradient(sd, s.t))):
-            d[k][:, j] = v
-        play_col = -np.asarray(_jvp_batch(s.robot, *[jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]))
-        s.cache[key] = np.stack([compliance_column(s, j), play_col], axis=2)
+        s.cache[key] = np.stack([compliance_column(s, j), link_lag_column(s, j, sg)], axis=2)
     return s.cache[key]
+
+
+def link_lag_column(s: TorqueSet, j: int, lag) -> np.ndarray:
+    """(N, n) change of the rigid torques when the link of joint ``j`` lags the measured angle by
+    ``lag`` (N,) per unit of it, to first order: minus RNEA's directional derivative along
+    ``e_j (lag, d lag/dt, d2 lag/dt2)``."""
+    lagd = np.gradient(lag, s.t)
+    d = [np.zeros_like(s.q) for _ in range(3)]
+    for k, v in enumerate((lag, lagd, np.gradient(lagd, s.t))):
+        d[k][:, j] = v
+    return -np.asarray(_jvp_batch(s.robot, *[jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]))
 
 
 @jax.jit
@@ -287,14 +293,7 @@ def compliance_column(s: TorqueSet, j: int) -> np.ndarray:
     damping and the motor's inertia are left out: the latter is ``rotor_inertia``)."""
     key = ("compliance", j)
     if key not in s.cache:
-        tj = smooth_torque(s)[:, j]
-        tjd = np.gradient(tj, s.t)
-        tjdd = np.gradient(tjd, s.t)
-        d = [np.zeros_like(s.q) for _ in range(3)]
-        for k, v in enumerate((tj, tjd, tjdd)):
-            d[k][:, j] = v
-        args = [jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]
-        s.cache[key] = -np.asarray(_jvp_batch(s.robot, *args))
+        s.cache[key] = link_lag_column(s, j, smooth_torque(s)[:, j])
     return s.cache[key]
 
 
