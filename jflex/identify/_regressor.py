@@ -13,8 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._dynamics import regressor as rigid_regressor
-from .._robot import Robot
+from .._checks import checked_arrays
+from .._robot import PRISMATIC, Robot
+from .._tree import support
+from ._data import check_shape
 
 _PI_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
@@ -73,7 +75,7 @@ class Regressor(eqx.Module):
         **Arguments:** ``q``, ``qd``, ``qdd`` (n,) [rad, rad/s, rad/s^2].
         """
         n = robot.nq
-        cols = [rigid_regressor(robot, q, qd, qdd)]
+        cols = [_rigid(robot, q, qd, qdd)]
         eye = jnp.eye(n, dtype=cols[0].dtype)
         if self.viscous:
             cols.append(eye * qd)
@@ -93,13 +95,116 @@ class Regressor(eqx.Module):
 
         **Arguments:** ``q``, ``qd``, ``qdd`` (N, n).
         """
-        return _stack(self, robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((robot, q, qd, qdd))):
+            return _rows(self, robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd))
+        q = check_shape(q, (None, robot.nq), "q", "Regressor.stack")
+        qd, qdd = (check_shape(x, q.shape, f, "Regressor.stack") for x, f in ((qd, "qd"), (qdd, "qdd")))
+        # Blocks of one fixed size, the last padded: one compiled program serves every N (the
+        # base-parameter search's few samples and the data's many), compiled once per robot
+        # structure since the robot is an argument.
+        N = q.shape[0]
+        pad = ((0, -N % _BLOCK), (0, 0))
+        q, qd, qdd = (np.pad(np.asarray(x, dtype=float), pad) for x in (q, qd, qdd))
+        # all blocks dispatched before any is waited for: they run while Python dispatches
+        parts = [_block(self, robot, q[i : i + _BLOCK], qd[i : i + _BLOCK], qdd[i : i + _BLOCK])
+                 for i in range(0, q.shape[0], _BLOCK)]
+        return jnp.asarray(np.concatenate([np.asarray(x) for x in parts])[: N * robot.nq])
 
 
-@eqx.filter_jit
-def _stack(reg, robot, q, qd, qdd):
+_BLOCK = 512  # samples per compiled regressor block
+
+
+def _rigid(robot: Robot, q, qd, qdd):
+    """Rigid-body regressor (n, 10 n): ``tau_i = sum_j S_i . (X_j Phi_j) pi_j`` over the bodies
+    ``j`` that joint ``i`` carries, with the motion subspaces ``S_i`` and the body regressors
+    ``Phi_j`` (6 x 10: the body force per unit of each inertial parameter) in world axes.
+
+    In world axes the velocities and accelerations are sums over the ancestors and the forces
+    need no backward pass, so only the placements are chained body by body; everything else is
+    one batch over the bodies, a short program that traces and compiles in a fraction of the
+    time of the scalarised kernels (``jflex.regressor``): the identification's start-up.
+    """
+    q, qd, qdd = checked_arrays("Regressor", robot, q=q, qd=qd, qdd=qdd)
+    n = robot.nq
+    prism = np.array([t == PRISMATIC for t in robot.joint_types])[:, None]
+    carries = np.zeros((n, n))  # carries[j, i]: joint i moves body j
+    for j in range(n):
+        carries[j, support(robot, j)] = 1.0
+    # joint placements at q, then the world placements along the tree
+    ax = robot.axis
+    sw, sv = jnp.where(prism, 0.0, ax), jnp.where(prism, ax, 0.0)
+    K, th = _hat(sw), jnp.where(prism[:, 0], 0.0, q)[:, None, None]
+    R_loc = _mm(robot.placement_R, jnp.eye(3) + jnp.sin(th) * K + (1.0 - jnp.cos(th)) * _mm(K, K))
+    p_loc = robot.placement_p + _mv(robot.placement_R, sv * q[:, None])
+    oR, op = [None] * n, [None] * n
+    for i, par in enumerate(robot.parents):
+        oR[i], op[i] = (R_loc[i], p_loc[i]) if par < 0 else (_mm(oR[par], R_loc[i]), op[par] + _mv(oR[par], p_loc[i]))
+    oR, op = jnp.stack(oR), jnp.stack(op)
+    # world-axes motion subspaces, spatial velocities and accelerations (at the world origin);
+    # the base accelerates upwards against gravity (Featherstone's trick)
+    Sw = _mv(oR, sw)
+    Sv = _mv(oR, sv) + jnp.cross(op, Sw)
+    w0, v0 = carries @ (Sw * qd[:, None]), carries @ (Sv * qd[:, None])
+    cw = jnp.cross(w0, Sw * qd[:, None])
+    cv = jnp.cross(w0, Sv * qd[:, None]) + jnp.cross(v0, Sw * qd[:, None])
+    aw0, av0 = carries @ (Sw * qdd[:, None] + cw), carries @ (Sv * qdd[:, None] + cv) - robot.gravity
+    # body axes, about the body origin, where the inertial parameters are given
+    Rt = jnp.swapaxes(oR, -1, -2)
+    w, aw = _mv(Rt, w0), _mv(Rt, aw0)
+    v, av = _mv(Rt, v0 + jnp.cross(w0, op)), _mv(Rt, av0 + jnp.cross(aw0, op))
+    Phi = _body_regressor(w, v, aw, av)  # (n, 6, 10)
+    f0 = _mm(oR, Phi[:, 3:])
+    n0 = _mm(oR, Phi[:, :3]) + _mm(_hat(op), f0)
+    Y = jnp.sum(Sw[:, None, :, None] * n0[None] + Sv[:, None, :, None] * f0[None], axis=2)  # (i, j, 10)
+    return (carries.T[:, :, None] * Y).reshape(n, 10 * n)
+
+
+_EPS = np.zeros((3, 3, 3))
+_EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
+_EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
+# I x == _mv(_INERTIA, x) @ (Ixx, Ixy, Iyy, Ixz, Iyz, Izz): the rotational inertia's product as a (3, 6) map
+_INERTIA = np.zeros((3, 6, 3))
+for _k, (_a, _b) in enumerate(((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))):
+    _INERTIA[_a, _k, _b] = _INERTIA[_b, _k, _a] = 1.0
+
+
+# Products of small matrices as broadcast sums, not dots: XLA:CPU fuses these, and compiles many
+# small (batched) dots slowly.
+def _mv(A, x):
+    """``A @ x`` over leading axes: (..., r, c), (..., c) -> (..., r)."""
+    return jnp.sum(A * x[..., None, :], axis=-1)
+
+
+def _mm(A, B):
+    """``A @ B`` over leading axes: (..., r, k), (..., k, c) -> (..., r, c)."""
+    return jnp.sum(A[..., :, :, None] * B[..., None, :, :], axis=-2)
+
+
+def _hat(a):
+    """(..., 3) -> (..., 3, 3) with ``_hat(a) @ b == cross(a, b)``."""
+    return -_mv(_EPS, a[..., None, :])
+
+
+def _body_regressor(w, v, aw, av):
+    """(..., 6, 10): the body force ``[n; f]`` (body axes, about the body origin) of a body moving
+    at ``(w, v)``, ``(aw, av)`` (spatial) per unit of each inertial parameter (Pinocchio's order):
+    ``n = I aw + h x av + w x (I w + h x v) + v x (m v - h x w)``, ``f = m av - h x aw + w x (m v - h x w)``."""
+    W, V = _hat(w), _hat(v)
+    n_h = -_hat(av) - _mm(W, V) + _mm(V, W)
+    f_h = _hat(aw) + _mm(W, W)
+    n_I = _mv(_INERTIA, aw[..., None, :]) + _mm(W, _mv(_INERTIA, w[..., None, :]))
+    f_m = (av + jnp.cross(w, v))[..., None]
+    top = jnp.concatenate([jnp.zeros_like(f_m), n_h, n_I], axis=-1)
+    bottom = jnp.concatenate([f_m, f_h, jnp.zeros(f_m.shape[:-1] + (6,), f_m.dtype)], axis=-1)
+    return jnp.concatenate([top, bottom], axis=-2)
+
+
+def _rows(reg, robot, q, qd, qdd):
     Y = jax.vmap(lambda a, b, c: reg(robot, a, b, c))(q, qd, qdd)
     return Y.reshape(-1, Y.shape[-1])
+
+
+_block = jax.jit(_rows)
 
 
 def random_samples(robot: Robot, n_samples: int, seed: int = 0, scale: float = np.pi):
