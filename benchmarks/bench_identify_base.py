@@ -6,14 +6,17 @@ Run: ``python benchmarks/bench_identify_base.py [--samples 10000] [--repeat 1] [
 The robot is TIAGo (example-robot-data, ``tiago_no_hand.urdf``) reduced to the torso lift joint
 and the 7 arm joints (wheels and head locked at 0): ``jflex.load_urdf(path, joints=...)`` and
 ``pin.buildReducedModel``. The parent process draws ``--samples`` random (q, qd, qdd) within the
-joint limits, computes the torques with Pinocchio's ``rnea`` and adds 1 % noise (per joint, of
-the torque's standard deviation); both sides read the same arrays. Each side then runs in a
+joint limits, computes the torques with Pinocchio's ``rnea`` plus viscous and Coulomb friction
+(``Fv qd + Fc sign(qd)`` per joint) and adds 1 % noise (per joint, of the torque's standard
+deviation); both sides read the same arrays and identify the link inertias and the friction (80 +
+16 standard parameters; 60 base parameters, as in issue 18's robot log). Each side then runs in a
 **fresh process**; its clock starts after the imports and the model load and includes every
 compilation (jflex's first calls compile):
 
-* jflex: ``base_parameters(robot)`` (its default random samples), ``Regressor.stack`` of all
-  samples, the base columns, ``numpy.linalg.lstsq``.
-* Pinocchio: ``computeJointTorqueRegressor`` in a Python loop, stacked; base parameters from
+* jflex: ``base_parameters(robot, Regressor())`` (its default random samples),
+  ``Regressor.stack`` of all samples, the base columns, ``numpy.linalg.lstsq``.
+* Pinocchio: ``computeJointTorqueRegressor`` in a Python loop with the friction columns
+  ``diag(qd), diag(sign(qd))`` beside it, stacked; base parameters from
   ``scipy.linalg.qr(W, pivoting=True)`` (rank at 1e-8 of the largest diagonal of R, the first
   ``rank`` pivots); ``numpy.linalg.lstsq`` on those columns.
 
@@ -68,7 +71,7 @@ d = np.load(sys.argv[1]); path = sys.argv[2]; joints = sys.argv[3].split(",")
 robot = jflex.load_urdf(path, joints=joints)
 q, qd, qdd, tau = d["q"], d["qd"], d["qdd"], d["tau"]
 t0 = time.perf_counter()
-reg = idf.Regressor(viscous=False, coulomb=False)
+reg = idf.Regressor(viscous=True, coulomb=True)
 bp = idf.base_parameters(robot, reg)
 t1 = time.perf_counter()
 A = np.asarray(reg.stack(robot, q, qd, qdd))
@@ -93,7 +96,8 @@ d = np.load(sys.argv[1])
 model = pin_model(sys.argv[2]); data = model.createData()
 q, qd, qdd, tau = d["q"], d["qd"], d["qdd"], d["tau"]
 t0 = time.perf_counter()
-W = np.vstack([pin.computeJointTorqueRegressor(model, data, a, b, c) for a, b, c in zip(q, qd, qdd)])
+W = np.vstack([np.hstack([pin.computeJointTorqueRegressor(model, data, a, b, c), np.diag(b), np.diag(np.sign(b))])
+               for a, b, c in zip(q, qd, qdd)])
 t1 = time.perf_counter()
 _, R, piv = scipy.linalg.qr(W, mode="economic", pivoting=True)
 dg = np.abs(np.diag(R)); r = int(np.sum(dg > 1e-8 * dg[0]))
@@ -120,7 +124,7 @@ def run_snippet(code, *args):
 
 
 def make_data(path, n_samples, seed=0):
-    """Random states within the limits and Pinocchio's torques plus 1 % noise."""
+    """Random states within the limits; Pinocchio's torques plus friction plus 1 % noise."""
     import pinocchio as pin
 
     model = pin_model(path)
@@ -131,6 +135,8 @@ def make_data(path, n_samples, seed=0):
     qd = rng.uniform(-1.0, 1.0, size=q.shape) * np.minimum(model.velocityLimit, np.pi)
     qdd = rng.uniform(-np.pi, np.pi, size=q.shape)
     tau = np.array([pin.rnea(model, data, a, b, c) for a, b, c in zip(q, qd, qdd)])
+    fv, fc = np.linspace(2.0, 0.5, model.nq), np.linspace(5.0, 1.0, model.nq)  # [N m s/rad], [N m]
+    tau = tau + fv * qd + fc * np.sign(qd)
     tau = tau + 0.01 * tau.std(axis=0) * rng.standard_normal(tau.shape)
     return q, qd, qdd, tau
 
@@ -162,7 +168,7 @@ def main(argv=None):
     assert abs(j["cond"] / p["cond_on_jflex_columns"] - 1) < 1e-6, (j["cond"], p["cond_on_jflex_columns"])
     assert np.allclose(j["rmse"], p["rmse"], rtol=1e-6), (j["rmse"], p["rmse"])
     ratio = j["total_s"] / p["total_s"]
-    print(f"TIAGo torso + arm, {len(JOINTS)} joints, {a.samples} samples, 1 % torque noise; "
+    print(f"TIAGo torso + arm, {len(JOINTS)} joints, {a.samples} samples, friction, 1 % torque noise; "
           f"load average {load0:.2f} -> {load1:.2f} on {os.cpu_count()} cores")
     print(f"base parameters: {j['rank']} of {A.shape[1]} (both); observation matrix max rel. difference {dA:.1e}")
     print(f"condition number: jflex's base columns {j['cond']:.4g} (Pinocchio's regressor on them "
