@@ -151,7 +151,7 @@ def run_demo(cfg: dict, run_dir: pathlib.Path, case_robot=None) -> dict:
         im = ax.imshow(data, origin="lower", extent=ext, aspect="auto", cmap="viridis")
         ax.set_xlabel("q3 [deg]")
         ax.set_ylabel("q2 [deg]")
-        ax.set_title(f"{spec}: {title}")
+        ax.set_title(f"{spec}:\n{title}", fontsize=10)
         fig.colorbar(im, ax=ax)
     fig.tight_layout()
     fig.savefig(run_dir / "gravity_maps.png", dpi=110)
