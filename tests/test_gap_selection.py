@@ -52,6 +52,24 @@ def test_a_lone_partial_match_to_an_unknown_effect_is_not_named():
     assert sel.steps == [] and sel.stop == "weak" and sel.rejected.cand == "x"
     assert sel.rejected.score >= DECISIVE_SCORE
     assert sel.ev["v"]["nrmse"] == pytest.approx(5.0)
+    # the report says what the probation reached: x alone, no decisive partner
+    assert sel.together == ((), pytest.approx(100 * (1 - 4.0 / np.sqrt(24.0))))
+
+
+def test_stop_reason_of_a_failed_probation_names_what_followed():
+    from jflex.gap._selection import stop_reason
+
+    class C(str):
+        def label(self, names):
+            return f"{self}@j"
+
+    s0, ev0, cands, refit = _problem({"x": 8.0, "y": 4.0, "?unknown": 12.0}, 1000.0)
+    sel = forward_select(s0, ev0, FLOOR, [C(c) for c in cands], refit, n_params=lambda c: 1, max_effects=3,
+                         min_first_shrink=MIN_NAMED_SHRINK)
+    # x then y are decisive but together close 1 - sqrt(12/24) = 29 % < 50 %: nothing named
+    assert sel.steps == [] and sel.together[0] == ("y",) and sel.together[1] == pytest.approx(100 * (1 - np.sqrt(0.5)))
+    msg = stop_reason(sel, ())
+    assert "x@j" in msg and "y@j" in msg and "29 %" in msg
 
 
 def test_a_first_effect_above_the_share_is_named_alone():

@@ -108,6 +108,7 @@ class Selection:
     ev: dict
     stop: str
     rejected: Step | None = None
+    together: tuple | None = None  # a failed probation: (the candidates taken after the first, % of the excess all closed)
 
 
 def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
@@ -151,9 +152,10 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
         # together, else none is named (two real effects each closing part of one gap are named;
         # a lone partial match to an effect outside the library is not)
         _, _, exc = gap_summary(ev_cur, floor)
-        if 100 * (1 - exc / exc0) >= weak[1]:
+        closed = 100 * (1 - exc / exc0)
+        if closed >= weak[1]:
             return Selection(steps, state, ev_cur, stop)
-        return Selection([], state0, ev0, "weak", weak[0])
+        return Selection([], state0, ev0, "weak", weak[0], (tuple(st_.cand for st_ in steps[1:]), float(closed)))
 
     while True:
         if len(steps) >= max_effects:
@@ -236,7 +238,10 @@ def stop_reason(sel: Selection, names) -> str:
         "too small": f"the best next candidate ({best}) closes less than {MIN_STEP_SHRINK:.0f} % of the remaining "
                      "excess or does not pay for its parameters on held-out data",
         "weak": f"the best candidate ({best}) closes only {sel.rejected.step_shrink:.0f} % of the excess gap "
-                f"(less than {MIN_NAMED_SHRINK:.0f} %): no effect of the library explains the gap"
+                + (f"alone and {sel.together[1]:.0f} % with the decisive effects that followed it "
+                   f"({', '.join(c.label(names) for c in sel.together[0]) or 'none'}) "
+                   if sel.together is not None else "")
+                + f"(less than {MIN_NAMED_SHRINK:.0f} %): no effect of the library explains the gap"
                 if sel.rejected is not None else "",
     }
     return why.get(sel.stop, sel.stop)
