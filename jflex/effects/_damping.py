@@ -10,7 +10,10 @@ length). Each law also gives its exact frequency-domain term, which
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -30,7 +33,25 @@ class AbstractDampingLaw(eqx.Module):
 
     ``P`` (r, m) projects ``e`` onto the displacements a displacement-driven law (hysteresis)
     acts on (default identity); the force returned is already mapped back, ``P^T F_r``.
+
+    Class attributes a law may set, read by the analyses that try laws as candidates
+    (:func:`jflex.gap.diagnose`), so that a law written here becomes one with no edit there:
+
+    - ``loss``: the leaf that scales the law's small-motion loss linearly (``k_e``, ``eta``);
+    - ``candidate``: the name under which the law is tried (None: never tried, e.g. the default
+      Kelvin-Voigt law every spring already has);
+    - ``shape``: ``(leaf, low, high)`` of a structural exponent the fit refines within bounds
+      (the fractional order), or None;
+    - :meth:`prototypes`: the law with unit loss, one per start value of its exponent.
     """
+
+    loss: ClassVar[str | None] = None
+    candidate: ClassVar[str | None] = None
+    shape: ClassVar[tuple | None] = None
+
+    @classmethod
+    def prototypes(cls) -> tuple:
+        return ()
 
     def state_suffixes(self, m: int, r: int) -> tuple[str, ...]:
         return ()
@@ -50,6 +71,39 @@ class AbstractDampingLaw(eqx.Module):
         return None
 
 
+def _registered(cls, out):
+    for sub in cls.__subclasses__():
+        out.append(sub)
+        _registered(sub, out)
+    return out
+
+
+def damping_laws() -> tuple:
+    """Every damping law class defined so far (the built-in ones and any a user imported) that
+    names itself a ``candidate``."""
+    return tuple(c for c in dict.fromkeys(_registered(AbstractDampingLaw, [])) if c.candidate)
+
+
+def complex_modulus(law: AbstractDampingLaw, omega) -> jnp.ndarray:
+    """Small-motion complex stiffness (F,) of a spring of unit stiffness on one coordinate with
+    ``law``, at angular frequencies ``omega`` (F,) [rad/s]: ``1 + dF/de + i omega dF/d(ed)`` at rest
+    (states at their initial values) plus the law's exact :meth:`~AbstractDampingLaw.frequency_term`,
+    i.e. what :func:`jflex.dynamic_stiffness` gives a :class:`Spring` with this law."""
+    return _complex_modulus(law, jnp.atleast_1d(jnp.asarray(omega, dtype=float)))
+
+
+@eqx.filter_jit
+def _complex_modulus(law, w):
+    K, P, e0 = jnp.ones((1, 1)), jnp.eye(1), jnp.zeros(1)
+    z0 = law.initial_state(1, 1)
+    ke = jax.jacfwd(lambda e: law.force(K, e, e0, z0, P))(e0)[0, 0]
+    ce = jax.jacfwd(lambda v: law.force(K, e0, v, z0, P))(e0)[0, 0]
+    out = 1.0 + ke + 1j * w * ce
+    if law.frequency_term(K, 1.0, P) is not None:
+        out = out + jax.vmap(lambda wi: law.frequency_term(K, wi, P)[0, 0])(w)
+    return out
+
+
 class KelvinVoigt(AbstractDampingLaw):
     """Stiffness-proportional (Kelvin-Voigt) damping ``F = k_e K ed`` (seed 004 Eq. 14).
 
@@ -58,9 +112,14 @@ class KelvinVoigt(AbstractDampingLaw):
     """
 
     k_e: jnp.ndarray
+    loss: ClassVar[str] = "k_e"
 
     def __init__(self, k_e):
         self.k_e = _pos(k_e, "KelvinVoigt.k_e")
+
+    @classmethod
+    def prototypes(cls) -> tuple:
+        return (cls(1.0),)
 
     def force(self, K, e, ed, z, P):
         return self.k_e * (K @ ed)

@@ -13,6 +13,8 @@ states per coordinate: ``G(s) = D + sum_k r_k / (s + w_k)``. In frequency the ex
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -73,6 +75,13 @@ class Fractional(AbstractDampingLaw):
     w_lo: jnp.ndarray
     w_hi: jnp.ndarray
     order: int = eqx.field(static=True)
+    loss: ClassVar[str] = "k_e"
+    candidate: ClassVar[str] = "fractional_damping"
+    shape: ClassVar[tuple] = ("alpha", 0.1, 0.95)
+
+    @classmethod
+    def prototypes(cls) -> tuple:
+        return tuple(cls(1.0, a) for a in (0.25, 0.5, 0.75))
 
     def __init__(self, k_e, alpha, band=(1e-2, 1e4), order: int = 6):
         if not np.isfinite(k_e) or float(k_e) < 0:

@@ -27,6 +27,8 @@ in a decaying free vibration the amplitude never exceeds it.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -74,6 +76,12 @@ class Hysteretic(AbstractDampingLaw):
     delta: jnp.ndarray
     reversal_rate: jnp.ndarray
     reversal_width: jnp.ndarray | None
+    loss: ClassVar[str] = "eta"
+    candidate: ClassVar[str] = "hysteretic_damping"
+
+    @classmethod
+    def prototypes(cls) -> tuple:
+        return (cls(eta=1.0),)
 
     def __init__(self, eta=0.0, h0=0.0, delta=1e-3, reversal_rate=1e4, reversal_width=None):
         for k, v in {"eta": eta, "h0": h0}.items():
