@@ -107,3 +107,21 @@ def test_bad_input_is_named():
         jflex.rnea_derivatives(robot.replace(inertia=np.zeros((3, 10))), q, q, q)
     with pytest.raises(jflex.ParameterError):
         jflex.aba_derivatives(robot.replace(inertia=np.zeros((3, 10))), q, q, q)
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_gravity_stiffness_matches_pinocchio(name):
+    robot, model = _urdf_pair(name)
+    data = model.createData()
+    rng = np.random.default_rng(5)
+    for _ in range(2):
+        q = _state(robot, rng)[0]
+        close(jflex.gravity_stiffness(robot, q), pin.computeGeneralizedGravityDerivatives(model, data, q))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_gravity_stiffness_matches_forward_mode_ad(seed):
+    """The closed form on prismatic joints and tilted gravity (the Panda above is the branching tree)."""
+    robot, rng = _dh_robot(seed)
+    q = rng.normal(size=robot.nq)
+    close(jflex.gravity_stiffness(robot, q), jax.jacfwd(lambda x: jflex.gravity(robot, x))(q))
