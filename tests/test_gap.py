@@ -15,7 +15,7 @@ import yaml
 
 import jflex
 from jflex_family import generate as G
-from jflex.gap import _linear as L
+from jflex.gap import _frequency_model as L
 from jflex.gap import _torque as T
 from jflex.gap import diagnose, load_case
 
@@ -224,7 +224,7 @@ def test_linear_model_equals_linearize_of_flexible_joint_model(rotor_case):
     c = load_case(rotor_case)
     k = np.array([3e4, 5e4, 2e4])
     cc = 1e-3 * k
-    lm = L.LinearModel(c.robot, L.LinearStructure(tuple(L.Spring("joint", j) for j in range(3))), "tool")
+    lm = L.FrequencyModel(c.robot, L.Structure(tuple(L.Site("joint", j) for j in range(3))), "tool")
     q0 = np.array([0.3, 0.8, -1.1])
     P = lm.mats(q0)
     model = jflex.Model(c.robot, [jflex.effects.FlexibleJoints(k, cc, rotor_inertia=[1e-4] * 3, gear_ratio=[50.0] * 3, coupling=False)])
@@ -236,14 +236,70 @@ def test_linear_model_equals_linearize_of_flexible_joint_model(rotor_case):
     np.testing.assert_allclose(H, np.asarray(Hj), rtol=1e-8, atol=1e-14)
 
 
+def test_frequency_model_is_jflex_linear_of_its_model(rotor_case):
+    """The diagnosis's fast evaluator gives what jflex.linear.frf gives for the jflex.Model it stands
+    for (the effects' own Spring, damping laws and Payload, rigid joints held), for every law of
+    jflex.effects, a coupled bearing pair, a link hinge and a payload."""
+    c = load_case(rotor_case)
+    E = jflex.effects
+    sites = (L.Site("joint", 0), L.Site("joint", 1, law=E.Hysteretic(eta=1.0)), L.Site("joint", 2, law=E.Fractional(1.0, 0.4)),
+             L.Site("orth", 0, 0), L.Site("orth", 0, 1, coupled=True), L.Site("link", 1, 0, frac=0.4), L.Site("link", 1, 1, frac=0.4))
+    lm = L.FrequencyModel(c.robot, L.Structure(sites, payload=True), "tool")
+    k = np.array([3e4, 5e4, 2e4, 4e5, 2e5, 8e4, 9e4])
+    cc = np.array([30.0, 0.05 * 5e4, 40.0, 400.0, 200.0, 80.0, 90.0])
+    x = np.r_[np.log(k), np.log(cc), np.log(1.5), np.arctanh(0.3)]
+    q0 = np.array([0.3, 0.8, -1.1])
+    freq = np.array([5.0, 20.0, 40.0, 90.0])
+    H = lm.frf(x, q0, freq)
+    model = lm.model(x)
+    Hj = jflex.frf(model, lm.posture(q0), 2 * np.pi * jnp.asarray(freq), hold=lm.held, frame="tool")
+    np.testing.assert_allclose(H, np.asarray(Hj), rtol=1e-7, atol=1e-14 * np.abs(H).max())
+    # and its analytic derivatives in the log parameters match central differences of it
+    _, dH = lm.frf_jacobian(x, q0, freq)
+    for p in (1, 8, 9, 14, 15):
+        h = 1e-6
+        e = np.zeros_like(x)
+        e[p] = h
+        fd = (lm.frf(x + e, q0, freq) - lm.frf(x - e, q0, freq)) / (2 * h)
+        np.testing.assert_allclose(dH[p], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+
+
+def test_a_damping_law_defined_outside_gap_is_a_frequency_candidate():
+    """A law written once (here, in a test file) with a loss leaf and a candidate name is tried by
+    the diagnosis at every flexible joint, its small-motion law read off its own equations."""
+    from jflex.gap._problem import law_candidates
+
+    class Ring(jflex.effects.AbstractDampingLaw):  # loss ~ sqrt(|w|) i: neither viscous nor hysteretic
+        k_e: jnp.ndarray
+        loss = "k_e"
+        candidate = "ring_damping"
+
+        def __init__(self, k_e=1.0):
+            self.k_e = jnp.asarray(float(k_e))
+
+        def force(self, K, e, ed, z, P):
+            return jnp.zeros_like(e)
+
+        def frequency_term(self, K, omega, P):
+            return 1j * self.k_e * jnp.sqrt(jnp.abs(omega)) * K
+
+        @classmethod
+        def prototypes(cls):
+            return (cls(1.0),)
+
+    assert law_candidates()["ring_damping"] is Ring
+    w = np.array([4.0, 100.0])
+    np.testing.assert_allclose(L.unit_loss(Ring(), w), 1j * np.sqrt(w), rtol=1e-12)
+
+
 def test_coupled_virtual_pair_equals_full_spd_stiffness(rotor_case):
     """A coupled orthogonal pair is the full 2x2 stiffness [[ka, r sqrt(ka kb)], [., kb]] (r = tanh x_r)."""
     c = load_case(rotor_case)
-    joint = [L.Spring("joint", j) for j in range(3)]
-    pair = [L.Spring("orth", 0, 0), L.Spring("orth", 0, 1, coupled=True)]
-    st = L.LinearStructure(tuple(joint + pair))
+    joint = [L.Site("joint", j) for j in range(3)]
+    pair = [L.Site("orth", 0, 0), L.Site("orth", 0, 1, coupled=True)]
+    st = L.Structure(tuple(joint + pair))
     assert st.pairs() == [(3, 4)] and st.n_params() == 11
-    lm = L.LinearModel(c.robot, st, "tool")
+    lm = L.FrequencyModel(c.robot, st, "tool")
     k = np.array([3e4, 5e4, 2e4, 4e5, 2e4])
     cc = 1e-3 * k
     r = 0.3
@@ -256,7 +312,7 @@ def test_coupled_virtual_pair_equals_full_spd_stiffness(rotor_case):
     np.testing.assert_allclose(H, Ht, rtol=1e-8, atol=1e-14)
     # with r = 0 it is the uncoupled pair
     H0 = lm.frf(np.r_[np.log(k), np.log(cc), 0.0], q0, freq)
-    H1 = L.LinearModel(c.robot, L.LinearStructure(tuple(joint + pair[:1] + [L.Spring("orth", 0, 1)])), "tool").frf(
+    H1 = L.FrequencyModel(c.robot, L.Structure(tuple(joint + pair[:1] + [L.Site("orth", 0, 1)])), "tool").frf(
         np.r_[np.log(k), np.log(cc)], q0, freq)
     np.testing.assert_allclose(H0, H1, rtol=1e-12)
 

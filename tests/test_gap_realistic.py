@@ -219,7 +219,7 @@ def test_modal_null_case_within_the_cad_tolerance_raises_no_alarm(tmp_path):
 
     from jflex.gap import load_case
     from jflex.gap._frequency_inertia import _Shifted, cad_spread
-    from jflex.gap import _linear as L
+    from jflex.gap import _frequency_model as L
     from jflex.gap._problem import Problem
 
     folder, _ = make_case(tmp_path / "modal_null", kind="modal", robot="arm3", effects=(), seed=8000 + 17 * 35)

@@ -11,7 +11,7 @@ springs, pulled toward CAD by the same prior and held within the same tolerance:
 
 $$ \\min_{x, u} \\; \\|r(x, \\pi_{cad} + s \\odot u)\\|^2 + \\lambda \\|u\\|^2, \\qquad |u_i| \\le 2, $$
 
-``r`` the training residual of :func:`._linear.residual`, ``s`` the CAD tolerance per parameter,
+``r`` the training residual of :func:`._frequency_model.residual`, ``s`` the CAD tolerance per parameter,
 ``lambda = w c_0 / N`` the user's ``inertia_prior`` weight ``w`` times the residual level ``c_0``
 of the springs-only fit per residual (a Gaussian MAP estimate at that noise level). The mass
 matrix, the gravity stiffness and (for payload candidates) their sensitivities are linear in the
@@ -40,21 +40,19 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.optimize as so
 
-from .._dynamics import crba
-from .._model import gravity_stiffness
-from . import _linear as L
+from . import _frequency_model as L
 from ._inertia import InertiaPrior
 
 
-class _Shifted(L.LinearModel):
-    """A :class:`._linear.LinearModel` whose robot's inertial parameters are CAD plus ``delta``
+class _Shifted(L.FrequencyModel):
+    """A :class:`._frequency_model.FrequencyModel` whose robot's inertial parameters are CAD plus ``delta``
     (10 n, the model links in Pinocchio's order), with ``M`` and ``K_g`` assembled from cached
     per-parameter bases."""
 
-    def __init__(self, lm: L.LinearModel):
+    def __init__(self, lm: L.FrequencyModel):
         self.robot, self.structure, self.tool = lm.robot, lm.structure, lm.tool
         self.aug, self.coord, self.model_index = lm.aug, lm.coord, lm.model_index
-        self.pairs = lm.pairs
+        self.pairs, self.held = lm.pairs, lm.held
         self._base = lm
         self._basis = {}
         self.delta = np.zeros(10 * lm.robot.nq)
@@ -63,20 +61,14 @@ class _Shifted(L.LinearModel):
     def basis(self, q0):
         key = tuple(np.round(np.asarray(q0, float), 12))
         if key not in self._basis:
-            qa = np.zeros(self.aug.nq)
-            qa[self.model_index] = q0
-            qa = jnp.asarray(qa)
-            c = self.coord
-
-            def mk(inert):
-                rob = self.aug.replace(inertia=inert)
-                return crba(rob, qa)[jnp.ix_(c, c)], gravity_stiffness(rob, qa)[jnp.ix_(c, c)]
-
-            # both are linear in the inertial parameters: their Jacobian is the basis
-            dM, dK = jax.jacfwd(mk)(jnp.asarray(self.aug.inertia))
+            qa = self.posture(q0)
+            # M and K_g of the linearisation are linear in the inertial parameters: their Jacobian is the basis
+            dM, dK = jax.jacfwd(lambda inert: self._linearization(self.aug.replace(inertia=inert), qa, traced=True))(
+                jnp.asarray(self.aug.inertia))
             rows = np.asarray(self.model_index)  # the model links' rows in the augmented robot
-            dM = np.asarray(dM)[:, :, rows, :].reshape(len(c), len(c), -1)
-            dK = np.asarray(dK)[:, :, rows, :].reshape(len(c), len(c), -1)
+            S = len(self.coord)
+            dM = np.asarray(dM)[:, :, rows, :].reshape(S, S, -1)
+            dK = np.asarray(dK)[:, :, rows, :].reshape(S, S, -1)
             self._basis[key] = (dM, dK)
         return self._basis[key]
 
@@ -88,14 +80,14 @@ class _Shifted(L.LinearModel):
         return L.PostureMats(P.M + dM @ self.delta, P.Kg + dK @ self.delta, P.J, P.dM, P.dKg)
 
 
-def shifted(lm: L.LinearModel, delta) -> L.LinearModel:
+def shifted(lm: L.FrequencyModel, delta) -> L.FrequencyModel:
     """``lm`` with its inertial parameters CAD plus ``delta`` (sharing its cached matrices)."""
     sh = _Shifted(lm)
     sh.delta = np.asarray(delta, float)
     return sh
 
 
-def refit_linear_inertia(lm: L.LinearModel, x, train, prior: InertiaPrior, delta0=None, box: float = 3.0,
+def refit_linear_inertia(lm: L.FrequencyModel, x, train, prior: InertiaPrior, delta0=None, box: float = 3.0,
                          max_nfev: int = 40):
     """Refit the springs' log parameters ``x`` of ``lm`` (a model of the CAD robot) together with the
     inertial correction (from ``delta0``, default CAD) on the frequency training sets ``train``.
@@ -135,7 +127,7 @@ def refit_linear_inertia(lm: L.LinearModel, x, train, prior: InertiaPrior, delta
     return s * v[nx:], v[:nx], float(gain)
 
 
-def cad_spread(lm: L.LinearModel, x, sets, prior: InertiaPrior, step: float = 1e-3) -> dict:
+def cad_spread(lm: L.FrequencyModel, x, sets, prior: InertiaPrior, step: float = 1e-3) -> dict:
     """Per modal table in ``sets``: the spread [% NRMSE, one std] of its gap that the CAD inertias'
     tolerance alone gives (``u ~ N(0, I)``, ``delta = s u``), to first order: the Frobenius norm of
     the table's residual Jacobian in ``u``, times 100. When the data cannot identify the inertias

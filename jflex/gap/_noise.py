@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import _linear as L
+from . import _frequency_model as L
 
 if TYPE_CHECKING:
     from ._case import Case
@@ -139,7 +139,7 @@ MODAL_DAMPING_PCT = 15.0  # default scatter of identified damping ratios [%]: EM
 
 def modal_floor(case: Case, zeta=None) -> tuple[float, str]:
     """NRMSE [%] that the scatter of identified modes leaves on a modal table, measured as the gap
-    is (:func:`._linear.modal_errors`: the frequency error plus ``DAMPING_WEIGHT`` x the relative
+    is (:func:`._frequency_model.modal_errors`: the frequency error plus ``DAMPING_WEIGHT`` x the relative
     damping error): ``sqrt(f^2 + (DAMPING_WEIGHT d)^2)`` with ``f`` = ``noise.modal_frequency_pct``
     and ``d`` = ``noise.modal_damping_pct`` of the case (defaults 1 % and 15 %); ``d`` only when the
     table's damping ratios ``zeta`` hold a measured value."""

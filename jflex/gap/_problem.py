@@ -8,21 +8,29 @@ from __future__ import annotations
 
 import dataclasses
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
+
+from ..effects import damping_laws
 
 from ._case import Case
 from ._effect_term import EffectCandidate, EffectTerm
 from ._frequency_inertia import refit_linear_inertia, shifted
 from ._noise import fits_to_noise
 from ._inertia import inertia_prior
-from . import _linear as L
+from . import _frequency_model as L
 from . import _response as R
 from . import _torque as T
 
 TORQUE_EFFECTS = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
                   "backlash", "payload", "sensor_delay", "joint_flexibility")
-LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "hysteretic_damping",
-                  "fractional_damping", "payload")
+LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "payload")
+# the damping laws of jflex.effects (and any a user defined) that name themselves candidates: each is
+# tried at every flexible joint, its small-motion law read off the law itself (:mod:`._frequency_model`)
+def law_candidates() -> dict:
+    """``{candidate name: law class}``, read when asked (a law defined after import counts too)."""
+    return {c.candidate: c for c in damping_laws()}
 # pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
 CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
                                      ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
@@ -148,29 +156,39 @@ class Problem:
             springs, x0 = [], []
             for e in self.nominal_effects:
                 if e["effect"] == "joint_flexibility":
-                    law = "viscous"
                     for j in e["joints"]:
-                        springs.append(L.Spring("joint", self.names.index(j), law=law))
+                        springs.append(L.Site("joint", self.names.index(j)))
                     k = e.get("stiffness", np.full(len(e["joints"]), 1e5))
                     c = e.get("damping", 1e-3 * k)
                     x0.append((np.log(k), np.log(np.maximum(c, 1e-9))))
-            # hysteretic / fractional nominal laws switch the spring at that joint
+            # a nominal damping law of jflex.effects (hysteretic, fractional, ...) replaces the viscous
+            # one at that joint; its loss starts where the viscous damping's is at the reference frequency
             laws = {}
             for e in self.nominal_effects:
-                if e["effect"] in ("hysteretic_damping", "fractional_damping"):
+                cls = law_candidates().get(e["effect"])
+                if cls is not None:
+                    protos = cls.prototypes()
                     for j in e["joints"]:
-                        laws[self.names.index(j)] = "hysteretic" if e["effect"] == "hysteretic_damping" else "fractional"
+                        laws[self.names.index(j)] = protos[len(protos) // 2]
+            if laws:
+                w = 2 * np.pi * self._ref_freq()
+                flat = [(i, s) for i, s in enumerate(springs)]
+                cs_all = np.concatenate([b for _, b in x0])
+                for i, s in flat:
+                    if s.where in laws:
+                        cs_all[i] = cs_all[i] + np.log(w / np.abs(L.unit_loss(laws[s.where], w)))
+                x0 = [(np.concatenate([a for a, _ in x0]), cs_all)]
             springs = [dataclasses.replace(s, law=laws.get(s.where, s.law)) for s in springs]
             ks = np.concatenate([a for a, _ in x0]) if x0 else np.zeros(0)
             cs = np.concatenate([b for _, b in x0]) if x0 else np.zeros(0)
-            structure = L.LinearStructure(tuple(springs), payload=False)
+            structure = L.Structure(tuple(springs), payload=False)
             x = np.concatenate([ks, cs])
             if tfit is not None and tfit.delta is not None:
                 # the torque data identified the inertial parameters: the linear model uses them
                 self.lin_robot = self.robot.replace(inertia=np.asarray(self.robot.inertia) + tfit.delta.reshape(self.n, 10))
             # else the frequency data refit them, with the nominal springs
             self._refit_linear = bool(self.options["refit_inertia"]) and self.lin_robot is self.robot
-            lm = L.LinearModel(self.lin_robot, structure, self.case.tool_frame)
+            lm = self._frequency_model(self.lin_robot, structure)
             if self.ftrain and len(springs):
                 x, _ = L.fit_linear(lm, x, self.ftrain)
                 if self._refit_linear:
@@ -192,8 +210,8 @@ class Problem:
         delta, x2, gain = refit_linear_inertia(lm, x, self.ftrain, prior)
         offered, held_out = False, None
         if gain > 0:
-            refit = L.LinearModel(self.robot.replace(inertia=np.asarray(self.robot.inertia) + delta.reshape(self.n, 10)),
-                                  lm.structure, self.case.tool_frame)
+            refit = self._frequency_model(self.robot.replace(inertia=np.asarray(self.robot.inertia) + delta.reshape(self.n, 10)),
+                                           lm.structure)
             if self.fval:
                 g0, g1 = (np.sqrt(np.mean([v["nrmse"] ** 2 for v in self.evaluate(State(None, m, xm), frequency_only=True).values()]))
                           for m, xm in ((lm, x), (refit, x2)))
@@ -232,16 +250,16 @@ class Problem:
                 out.append(Candidate("orthogonal_compliance", j))
                 out.append(Candidate("link_flexibility", j))
                 if j in flex:
-                    if ("hysteretic_damping", j) not in self.nominal:
-                        out.append(Candidate("hysteretic_damping", j))
-                    if ("fractional_damping", j) not in self.nominal:
-                        out.append(Candidate("fractional_damping", j))
+                    # every damping law of jflex.effects that names itself a candidate
+                    for name in law_candidates():
+                        if (name, j) not in self.nominal:
+                            out.append(Candidate(name, j))
             if "payload" not in nom and not self.ttrain:
                 out.append(Candidate("payload", None))
         return list(dict.fromkeys(out))
 
     def _nominal_springs(self):
-        return [L.Spring("joint", self.names.index(j)) for e in self.nominal_effects
+        return [L.Site("joint", self.names.index(j)) for e in self.nominal_effects
                 if e["effect"] == "joint_flexibility" for j in e["joints"]]
 
     # --- refits --------------------------------------------------------------------------------
@@ -257,7 +275,7 @@ class Problem:
             else:
                 tfit = T.fit_with(tfit.terms, tfit.delay, T.Term(cand.effect, cand.joint, T.STRIBECK_VS[2]), self.ttrain,
                                   self.inertia)
-        if cand.effect in LINEAR_EFFECTS and self.ftrain and lm is not None:
+        if (cand.effect in LINEAR_EFFECTS or cand.effect in law_candidates()) and self.ftrain and lm is not None:
             lm, x = self._add_linear(lm, x, cand)
         return State(tfit, lm, x, state.added + (cand,))
 
@@ -268,24 +286,26 @@ class Problem:
         pay = list(x[2 * S:2 * S + 1]) if st.payload else []
         cpl = list(x[2 * S + len(pay):])  # couplings of virtual pairs already in the model
         springs = list(st.springs)
-        if cand.effect in ("hysteretic_damping", "fractional_damping"):
+        if cand.effect in law_candidates():
             i = next(i for i, s in enumerate(springs) if s.kind == "joint" and s.where == cand.joint)
-            law = "hysteretic" if cand.effect == "hysteretic_damping" else "fractional"
+            cls = law_candidates()[cand.effect]
+            shape = cls.shape
             tried = {}
 
-            def fit_alpha(a):
+            def fit_law(proto):
+                key = L.law_key(proto)
                 sp = list(springs)
-                sp[i] = dataclasses.replace(sp[i], law=law, alpha=round(float(a), 3))
-                lm2 = L.LinearModel(lm.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+                sp[i] = dataclasses.replace(sp[i], law=proto)
+                lm2 = self._frequency_model(lm.robot, L.Structure(tuple(sp), st.payload))
                 lm2._cache = lm._cache  # same geometry and postures: the matrices carry over
                 x2 = np.array(x, float)
                 w = 2 * np.pi * self._ref_freq()
-                k, c = np.exp(x2[i]), np.exp(x2[S + i])
-                # the same loss at the reference frequency (eta = w c / k, c_frac = w c / w^alpha) is
-                # only a guess (the spring's own mode may lie elsewhere): scan the new damping
-                # coefficient around it, then fit everything from the best (no peaks phase: the
-                # picked peaks' half-power damping is what a damping law must not chase)
-                c0 = np.log(w * c / k) if law == "hysteretic" else np.log(w * c / w**a)
+                c = np.exp(x2[S + i])
+                # the same loss at the reference frequency as the viscous damping it replaces is only a
+                # guess (the spring's own mode may lie elsewhere): scan the new loss around it, then
+                # fit everything from the best (no peaks phase: the picked peaks' half-power damping
+                # is what a damping law must not chase)
+                c0 = np.log(w * c / np.abs(L.unit_loss(proto, w)))
                 best0 = None
                 for dc in np.arange(-3.0, 3.01, 0.5):
                     x2[S + i] = c0 + dc
@@ -293,24 +313,25 @@ class Problem:
                     if best0 is None or r @ r < best0[0]:
                         best0 = (float(r @ r), x2.copy())
                 xf, cost = L.fit_linear(lm2, best0[1], self.ftrain, peaks_first=False)
-                tried[float(a)] = (cost, lm2, xf)
+                tried[key[1] if shape else 0.0] = (cost, lm2, xf)
                 return cost
 
-            if law == "hysteretic":
-                fit_alpha(0.5)
-            else:
-                for a in L.ALPHAS:
-                    fit_alpha(a)
-                # refine the order: steps of 0.1, 0.05 and 0.025 either side of the best order tried,
+            protos = cls.prototypes()
+            for proto in protos:
+                fit_law(proto)
+            if shape is not None:
+                # refine the exponent: steps of 0.1, 0.05 and 0.025 either side of the best value tried,
                 # then the vertex of a parabola through the best and its (now close) neighbours (one
-                # parabola through the wide grid stopped 0.07 off the order)
+                # parabola through the wide grid stopped 0.07 off the fractional order)
+                leaf, lo_a, hi_a = shape
+                at = lambda a: eqx.tree_at(lambda l: getattr(l, leaf), protos[0], jnp.asarray(a))
                 best_a = lambda: min(tried, key=lambda a: tried[a][0])
                 for h in (0.1, 0.05, 0.025):
                     a0 = best_a()
                     for a_new in (a0 - h, a0 + h):
-                        a_new = round(float(np.clip(a_new, 0.1, 0.95)), 3)
+                        a_new = round(float(np.clip(a_new, lo_a, hi_a)), 3)
                         if a_new not in tried:
-                            fit_alpha(a_new)
+                            fit_law(at(a_new))
                 al = sorted(tried)
                 kb = min(max(al.index(best_a()), 1), len(al) - 2)
                 xa = np.array(al[kb - 1:kb + 2])
@@ -319,24 +340,24 @@ class Problem:
                 if cpar[0] > 0:
                     a_new = round(float(np.clip(xa[1] - cpar[1] / (2 * cpar[0]), xa[0], xa[2])), 3)
                     if a_new not in tried:
-                        fit_alpha(a_new)
+                        fit_law(at(a_new))
             cost, lm2, xf = min(tried.values(), key=lambda t: t[0])
             return lm2, xf
         if cand.effect == "payload":
-            st2 = L.LinearStructure(tuple(springs), True)
-            lm2 = L.LinearModel(lm.robot, st2, self.case.tool_frame)
+            st2 = L.Structure(tuple(springs), True)
+            lm2 = self._frequency_model(lm.robot, st2)
             xs = [np.concatenate([ks, cs, [np.log(m)], cpl]) for m in (0.1, 1.0, 10.0)]
             xf, _ = L.fit_linear(lm2, xs[0], self.ftrain, starts=xs[1:])
             return lm2, xf
         if cand.effect == "joint_flexibility":
-            new = [L.Spring("joint", cand.joint)]
+            new = [L.Site("joint", cand.joint)]
         elif cand.effect == "orthogonal_compliance":
             # a bearing's tilt stiffness: a full 2x2 (coupled) stiffness about the two axes
-            new = [L.Spring("orth", cand.joint, 0), L.Spring("orth", cand.joint, 1, coupled=True)]
+            new = [L.Site("orth", cand.joint, 0), L.Site("orth", cand.joint, 1, coupled=True)]
         else:
-            new = [L.Spring("link", cand.joint, 0), L.Spring("link", cand.joint, 1, coupled=True)]
+            new = [L.Site("link", cand.joint, 0), L.Site("link", cand.joint, 1, coupled=True)]
         sp = springs + new
-        lm2 = L.LinearModel(lm.robot, L.LinearStructure(tuple(sp), st.payload), self.case.tool_frame)
+        lm2 = self._frequency_model(lm.robot, L.Structure(tuple(sp), st.payload))
         # starting stiffnesses: the new spring(s) alone would put a mode at f_t; f_t is scanned over a
         # log grid from below the measured band to well above it (a compliance whose modes lie
         # above the band shows only as a posture-dependent static softening), both springs of a
@@ -397,6 +418,10 @@ class Problem:
             best = L.fit_linear(lm2, best[1], self.ftrain, peaks_first=False)[::-1]
         return lm2, best[1]
 
+    def _frequency_model(self, robot, structure):
+        return L.FrequencyModel(robot, structure, self.case.tool_frame,
+                                postures=[d.arrays["q0"] for d in self.ftrain + self.fval])
+
     def _ref_posture(self):
         return self.ftrain[0].arrays["q0"]
 
@@ -446,13 +471,8 @@ class Problem:
                 if s.kind != "joint":
                     continue
                 k, v = float(np.exp(state.x[i])), float(np.exp(state.x[S + i]))
-                if s.law == "hysteretic":
-                    c = v * k / w
-                elif s.law == "fractional":
-                    c = v * w ** (s.alpha - 1) * np.sin(s.alpha * np.pi / 2)
-                    k = k + v * w**s.alpha * np.cos(s.alpha * np.pi / 2)
-                else:
-                    c = v
+                d = k + v * complex(L.unit_loss(s.law, w))
+                k, c = d.real, d.imag / w
                 out[s.where] = (k, c)
             return out
         for e in self.nominal_effects:
@@ -530,9 +550,14 @@ def parameters(pb: Problem, st: State) -> dict:
         for i, s in enumerate(sp):
             nm = {"joint": pb.names[s.where], "orth": f"{pb.names[s.where]}_orth_{'ab'[s.axis]}",
                   "link": f"{pb.robot.link_names[s.where]}_bend_{'ab'[s.axis]}"}[s.kind]
-            lin[nm] = {"stiffness [N m/rad]": float(np.exp(st.x[i])), "law": s.law,
-                       {"viscous": "damping [N m s/rad]", "hysteretic": "loss factor eta",
-                        "fractional": f"c [N m s^{s.alpha}/rad]"}[s.law]: float(np.exp(st.x[S + i]))}
+            k, c = float(np.exp(st.x[i])), float(np.exp(st.x[S + i]))
+            lin[nm] = {"stiffness [N m/rad]": k, "law": L.law_name(s.law)}
+            if isinstance(s.law, L.KelvinVoigt):
+                lin[nm]["damping [N m s/rad]"] = c
+            else:
+                lin[nm][type(s.law).loss] = c / k
+                if type(s.law).shape:
+                    lin[nm][type(s.law).shape[0]] = float(getattr(s.law, type(s.law).shape[0]))
         if st.lm.structure.payload:
             lin["payload"] = {"mass [kg]": float(np.exp(st.x[2 * S]))}
         for (a, b), r in zip(st.lm.pairs, st.lm.coupling(st.x)):

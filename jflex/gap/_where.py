@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import _linear as L
+from . import _frequency_model as L
 
 if TYPE_CHECKING:
     from ._case import Case

@@ -21,7 +21,7 @@ import yaml
 
 from jflex._config import load_robot
 from jflex._dynamics import rnea
-from jflex.gap import _linear as L
+from jflex.gap import _frequency_model as L
 
 # --- robots (written as DH YAML so the case is self-contained) -------------------------------------
 ROBOTS = {
@@ -174,7 +174,7 @@ def torque_data(robot, truths, t, q, qd, qdd, rng, noise, nominal_friction=None)
 def frf_truth(robot, tool, springs, K, laws, q0, freq, payload=None):
     """Tool receptance (F, 3, 3) of a truth with a full spring matrix ``K`` (S, S) (coupling allowed)
     and per-spring laws ``[(law, value, alpha)]``; optional payload ``(m, offset)``."""
-    lm = L.LinearModel(robot, L.LinearStructure(tuple(springs)), tool)
+    lm = L.FrequencyModel(robot, L.Structure(tuple(springs)), tool)
     P = lm.mats(q0)
     M, Kg = P.M, P.Kg
     if payload is not None:
@@ -184,7 +184,7 @@ def frf_truth(robot, tool, springs, K, laws, q0, freq, payload=None):
         pm = L._point_mass(p) * payload[0]
         pm[[4, 6, 9]] += 0.4 * payload[0] * 0.06**2
         inert[body] += pm
-        lm2 = L.LinearModel(robot, L.LinearStructure(tuple(springs)), tool)
+        lm2 = L.FrequencyModel(robot, L.Structure(tuple(springs)), tool)
         lm2.aug = lm.aug.replace(inertia=inert)
         P2 = lm2.mats(q0)
         M, Kg = P2.M, P2.Kg
@@ -380,7 +380,7 @@ def frf_case(folder, robot_name, truths, seed, noise=0.01, n_post=3, tip_noise=N
     n = robot.nq
     kj = np.array([4e4, 6e4, 2e4, 5e3][:n]) * rng.uniform(0.8, 1.25, n)
     cj = kj * rng.uniform(4e-4, 8e-4, n)
-    springs = [L.Spring("joint", j) for j in range(n)]
+    springs = [L.Site("joint", j) for j in range(n)]
     laws = [["viscous", float(c), 0.5] for c in cj]
     Kd = list(kj)
     truth, nominal_joints = [], list(range(n))
@@ -392,11 +392,11 @@ def frf_case(folder, robot_name, truths, seed, noise=0.01, n_post=3, tip_noise=N
             j = int(rng.integers(0, n - 1)) if eff == "link_flexibility" else int(rng.integers(0, n))
             kind = "orth" if eff == "orthogonal_compliance" else "link"
             frac_note = {}
-            ss = [L.Spring(kind, j, 0), L.Spring(kind, j, 1)]
+            ss = [L.Site(kind, j, 0), L.Site(kind, j, 1)]
             if kind == "link":
-                ss = [L.Spring("link", j, a, frac=0.4) for a in (0, 1)]
+                ss = [L.Site("link", j, a, frac=0.4) for a in (0, 1)]
                 frac_note = {"hinge_at": 0.4}
-            lm = L.LinearModel(robot, L.LinearStructure(tuple(springs + extra_springs + ss)), "tool")
+            lm = L.FrequencyModel(robot, L.Structure(tuple(springs + extra_springs + ss)), "tool")
             P = lm.mats(np.zeros(n))
             ktarget = []
             for s in range(2):

@@ -1,59 +1,147 @@
-"""Frequency-side terms of the gap diagnosis: a linear model at each measured posture.
+"""The frequency side of the gap diagnosis: a :class:`jflex.Model` of elastic sites at each measured
+posture, evaluated fast for the many parameter values of a fit.
 
-The motors are held (perfect position control, seed 003's assumption), so the linear model
-lives on the *elastic* coordinates: the link side of each flexible joint (a spring to the held
-motor) and the virtual joints that candidates insert into the kinematic tree:
+The motors are held (perfect position control, seed 003's assumption), so the model's free
+coordinates are its *elastic* ones: the link side of each flexible joint and the virtual joints
+that candidates insert into the kinematic tree (:class:`Site`):
 
-- ``orthogonal_compliance`` at joint j: two virtual revolute joints at joint j's origin, about
-  the two axes perpendicular to its rotation axis, each with a spring (bearing tilt);
-- ``link_flexibility`` of link i: two virtual bending hinges at mid-span of link i, about the
-  axes perpendicular to the link (its first bending mode, lumped);
-- a virtual pair's two springs may be coupled (``Spring.coupled`` on its axis-1 spring): a full
-  symmetric positive-definite 2x2 stiffness ``[[k_a, r sqrt(k_a k_b)], [r sqrt(k_a k_b), k_b]]``,
-  ``r = tanh(x_r)`` in (-1, 1) (the principal axes need not be the ones :func:`_perp` picks);
-- ``joint_flexibility`` at joint j: a torsion spring at a joint the nominal model holds rigid;
-- ``payload``: a point mass at the tool frame.
+- ``orth`` at joint j (orthogonal compliance): two virtual revolute joints at joint j's origin,
+  about the two axes perpendicular to its rotation axis (a bearing's tilt);
+- ``link`` of link i (link flexibility): two virtual bending hinges at a fraction ``frac`` of link
+  i, about the axes perpendicular to the link (its first bending mode, lumped);
+- ``joint`` at joint j: a joint the nominal model holds rigid, or a flexible joint's link side.
 
-Rigid joints are locked at the posture. With ``x`` the elastic coordinates,
+Each site carries a :class:`jflex.effects.Spring` (a virtual pair may couple its two springs: a full
+symmetric positive-definite 2x2 stiffness ``[[k_a, r sqrt(k_a k_b)], [r sqrt(k_a k_b), k_b]]``,
+``r = tanh(x_r)``, as the principal axes need not be the ones :func:`_perp` picks) and a damping law
+of :mod:`jflex.effects` (:class:`~jflex.effects.StructuralDamping` on the site's stiffness), and the
+tool a :class:`jflex.effects.Payload` when the structure has one. :meth:`FrequencyModel.model` is
+that :class:`jflex.Model`; its :func:`jflex.linear.frf` with the rigid joints held is what
+:meth:`FrequencyModel.frf` returns (checked in the tests). The fit evaluates it without
+re-tracing the model for every parameter value: with ``x`` the elastic coordinates,
 
-$$ D(\\omega) = K_g - \\omega^2 M + \\sum_s E_s\\, d_s(\\omega), \\qquad H = J D^{-1} J^T, $$
+$$ D(\\omega) = K_g - \\omega^2 M + \\operatorname{diag}_s\\big(k_s + c_s\\,\\psi_s(\\omega)\\big)
+   + \\text{couplings}, \\qquad H = J D^{-1} J^T, $$
 
-where ``M``, ``K_g = dG/dq`` and the tool Jacobian ``J`` come from :func:`jflex.crba`,
-:func:`jflex.gravity_stiffness` and :func:`jflex.jacobian` of the augmented robot, and each
-spring's law ``d_s`` is viscous ``k + i w c``, hysteretic ``k (1 + i eta)`` or fractional
-``k + c (i w)^alpha``. This equals :func:`jflex.linearize` of
-``Model(robot, [FlexibleJoints(..., coupling=False)])`` with the motors held for the nominal
-structure (checked in the tests).
+``M`` and ``K_g`` the linearisation of the rigid augmented robot, other joints held (with the
+payload's share, which is linear in its mass), ``J`` the tool Jacobian, and ``psi_s`` the damping
+law's own complex modulus with unit loss (:func:`jflex.effects.complex_modulus` less 1: ``i w`` for
+Kelvin-Voigt, ``i`` for hysteretic, ``(i w)^alpha`` for fractional damping). ``c_s = k_s theta_s``
+is the loss stiffness, ``theta_s`` the law's loss leaf (``k_e``, ``eta``), in which every law of
+:mod:`jflex.effects` is linear: a law defined there is evaluated here without a line of its own.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import scipy.optimize as so
 
 from .._dynamics import crba, jacobian
-from .._model import gravity_stiffness
+from .._model import Model, gravity_stiffness
 from .._robot import make_robot
+from ..effects import KelvinVoigt, Payload, Spring, StructuralDamping, complex_modulus
 
-LAWS = ("viscous", "hysteretic", "fractional")
-ALPHAS = (0.25, 0.5, 0.75)
+VISCOUS = KelvinVoigt(1.0)  # every site's default law: the loss stiffness c_s is a viscous coefficient
 
 
-@dataclasses.dataclass(frozen=True)
-class Spring:
+def law_key(law) -> tuple:
+    """A hashable key of a unit-loss law prototype: its class and structural exponent."""
+    shape = type(law).shape
+    return (type(law).__name__,) + ((round(float(getattr(law, shape[0])), 6),) if shape else ())
+
+
+def law_name(law) -> str:
+    """The law's name in reports: its candidate name, or ``viscous`` for the default."""
+    return type(law).candidate or ("viscous" if isinstance(law, KelvinVoigt) else type(law).__name__)
+
+
+def with_loss(law, theta):
+    """The prototype ``law`` with its loss leaf set to ``theta``."""
+    return eqx.tree_at(lambda l: getattr(l, type(l).loss), law, jnp.asarray(float(theta)))
+
+
+def unit_loss(law, omega, tabulated: bool = False) -> np.ndarray:
+    """``psi(omega)``: the law's complex modulus with unit loss, less the unit stiffness (cached on
+    data grids; the law is checked once to be linear in its loss leaf).
+
+    ``tabulated``: for the few, ever-changing frequencies of a modal iteration, interpolate
+    ``log|psi|`` and the phase of ``psi`` in ``log omega`` on a dense table of the law, which is
+    exact for the power laws (viscous, hysteretic, fractional) and within ~1e-5 for smooth
+    others; frequencies off the table, or a law with ``psi = 0`` on it, are evaluated exactly."""
+    w = np.asarray(omega, float)
+    if tabulated:
+        tab = _table(law)
+        if tab is not None and w.size and np.all((w >= _TABLE_W[0]) & (w <= _TABLE_W[-1])):
+            lw = np.log(w)
+            return np.exp(np.interp(lw, _TABLE_LW, tab[0])) * np.exp(1j * np.interp(lw, _TABLE_LW, tab[1]))
+    # keyed on the law object (kept alive in the value, so its id is not reused): a fit asks for
+    # the same law on the same grid thousands of times
+    ck = (id(law), w.shape, w.tobytes())
+    hit = _PSI.get(ck)
+    if hit is None:
+        _check_linear(law)
+        if len(_PSI) > 512:
+            _PSI.clear()
+        hit = _PSI[ck] = (law, (np.asarray(complex_modulus(law, w.ravel())) - 1.0).reshape(w.shape))
+    return hit[1]
+
+
+_TABLE_W = np.logspace(-3, 6, 4501)
+_TABLE_LW = np.log(_TABLE_W)
+
+
+def _table(law):
+    ck = (id(law), "table")
+    hit = _PSI.get(ck)
+    if hit is None:
+        psi = unit_loss(law, _TABLE_W)
+        tab = None if np.any(psi == 0) else (np.log(np.abs(psi)), np.unwrap(np.angle(psi)))
+        hit = _PSI[ck] = (law, tab)
+    return hit[1]
+
+
+def _check_linear(law):
+    key = law_key(law)
+    if key in _LINEAR_CHECKED:
+        return
+    if type(law).loss is None:
+        raise TypeError(f"{type(law).__name__}: a damping law tried as a candidate must name its loss leaf (class attribute 'loss')")
+    wt = np.array([1.0, 10.0, 100.0])
+    p1 = np.asarray(complex_modulus(law, wt)) - 1.0
+    p2 = np.asarray(complex_modulus(with_loss(law, 2.0), wt)) - 1.0
+    if not np.allclose(p2, 2 * p1, rtol=1e-9, atol=1e-12):
+        raise ValueError(f"{type(law).__name__}: its small-motion loss is not linear in '{type(law).loss}'")
+    _LINEAR_CHECKED[key] = bool(np.ptp(p1.real) > 1e-12 * max(np.abs(p1).max(), 1e-300))
+
+
+def frequency_dependent(law) -> bool:
+    """Whether the law's storage stiffness changes with frequency (a fractional law's does)."""
+    _check_linear(law)
+    return _LINEAR_CHECKED[law_key(law)]
+
+
+_PSI: dict = {}
+_LINEAR_CHECKED: dict = {}  # law key -> frequency dependent
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Site:
     """One elastic coordinate: ``kind`` joint | orth | link, at joint/link index ``where``,
-    ``axis`` 0/1 for virtual pairs, damping ``law`` (``alpha`` for fractional)."""
+    ``axis`` 0/1 for virtual pairs, its damping ``law`` (a unit-loss prototype of a
+    :mod:`jflex.effects` law), ``frac`` the position of a link hinge along the link (0 root, 1
+    tip), ``coupled`` on the axis-1 site of a pair whose stiffness couples with its axis-0 partner."""
 
     kind: str
     where: int
     axis: int = 0
-    law: str = "viscous"
-    alpha: float = 0.5
-    frac: float = 0.5  # link hinges: position along the link (0 root, 1 tip)
-    coupled: bool = False  # axis 1 of a virtual pair: a stiffness coupling with its axis-0 partner
+    law: object = VISCOUS
+    frac: float = 0.5
+    coupled: bool = False
 
 
 def _perp(a):
@@ -64,7 +152,7 @@ def _perp(a):
     return u1, np.cross(a, u1)
 
 
-def augment(robot, springs, payload: bool = False):
+def augment(robot, springs):
     """The robot with the virtual joints of ``springs`` inserted (zero-inertia links), and the
     index of each spring's coordinate in it. Returns ``(robot_aug, coord_index (S,), model_index (n,))``."""
     n = robot.nq
@@ -119,8 +207,6 @@ def augment(robot, springs, payload: bool = False):
                 f["parent"], f["p"] = v2["link"], f["p"] - mid
             joints[j + 1:j + 1] = [v1, v2]
             virtual[("link", s.where)] = (v1["name"], v2["name"])
-    if payload:
-        pass  # handled by the caller through the last link's inertia (linear in the mass)
     names = [j["link"] for j in joints]
     aug = make_robot(
         joint_names=[j["name"] for j in joints], link_names=names,
@@ -164,15 +250,15 @@ class PostureMats:
     dKg: np.ndarray | None
 
 
-@dataclasses.dataclass(frozen=True)
-class LinearStructure:
-    """Elastic coordinates and their laws, plus an optional tool payload."""
+@dataclasses.dataclass(frozen=True, eq=False)
+class Structure:
+    """Elastic sites and their laws, plus an optional tool payload."""
 
     springs: tuple
     payload: bool = False
 
     def pairs(self) -> list:
-        """``[(a, b)]`` spring indices of the coupled virtual pairs (``b`` the coupled axis-1 spring)."""
+        """``[(a, b)]`` site indices of the coupled virtual pairs (``b`` the coupled axis-1 site)."""
         out = []
         for b, s in enumerate(self.springs):
             if s.coupled:
@@ -187,8 +273,6 @@ class LinearStructure:
 def _quiet(fn):
     # trial parameters of a fit can overflow or meet a singular matrix; those show up as NaN/inf
     # residuals (handled by the callers), not as warnings on the console
-    import functools
-
     @functools.wraps(fn)
     def wrapped(*a, **k):
         with np.errstate(all="ignore"):
@@ -197,44 +281,81 @@ def _quiet(fn):
     return wrapped
 
 
-class LinearModel:
-    """Evaluates FRFs and modes of a :class:`LinearStructure` at postures, parameters in log form:
-    ``[log k_s, log c_s (or eta_s) for each spring, log m_payload, atanh r of each coupled pair]``."""
+def _elastic_linearization(rob, qa, coord: tuple):
+    # the linearisation of the rigid robot about rest with the non-elastic joints held, i.e.
+    # jflex.linearize of Model(rob, []) (tests/test_gap.py checks the two agree), from the crba and
+    # gravity kernels: a diagnosis asks for it at every posture of every candidate structure, where
+    # tracing a linearize, or compiling one per structure, costs seconds each time
+    ix = jnp.ix_(jnp.array(coord), jnp.array(coord))
+    return crba(rob, qa)[ix], gravity_stiffness(rob, qa)[ix]
 
-    def __init__(self, robot, structure: LinearStructure, tool_frame):
+
+class FrequencyModel:
+    """FRFs and modes of a :class:`Structure` at postures, parameters in log form:
+    ``[log k_s, log c_s for each site, log m_payload, atanh r of each coupled pair]``
+    (``c_s = k_s theta_s`` the loss stiffness of the site's law)."""
+
+    def __init__(self, robot, structure: Structure, tool_frame, postures=()):
         self.robot, self.structure, self.tool = robot, structure, tool_frame
+        # the postures the data hold: the matrices of all of them are computed at the first request
+        self.postures = [np.asarray(q, float) for q in postures]
         self.aug, self.coord, self.model_index = augment(robot, structure.springs)
         self.pairs = structure.pairs()
+        elastic = set(int(c) for c in self.coord)
+        self.held = tuple(nm for i, nm in enumerate(self.aug.joint_names) if i not in elastic)
         self._cache = {}
 
-    def mats(self, q0) -> PostureMats:
-        key = tuple(np.round(np.asarray(q0, float), 12))
-        if key in self._cache:
-            return self._cache[key]
+    def _tool(self):
+        return self.tool if self.tool is not None else self.aug.link_names[-1]
+
+    def _payload_params(self):
+        """(body index, unit point-mass parameters) of the tool payload."""
+        body, k = self.aug.frame_index(self._tool())
+        p = np.zeros(3) if k < 0 else np.asarray(self.aug.frame_p[k])
+        return body, _point_mass(p)
+
+    def posture(self, q0) -> np.ndarray:
+        """The augmented robot's coordinates at the model posture ``q0`` (virtual joints at 0)."""
         qa = np.zeros(self.aug.nq)
         qa[self.model_index] = q0
+        return qa
+
+    def _linearization(self, rob, qa, traced: bool = False):
+        """``(M, K_g)`` over the elastic coordinates, in site order: the linearisation of the rigid
+        augmented robot ``rob`` with every other joint held (``qa`` (nq,) or a batch (B, nq))."""
+        coord = tuple(int(c) for c in self.coord)
         qa = jnp.asarray(qa)
-        c = self.coord
-        tool = self.tool if self.tool is not None else self.aug.link_names[-1]
+        if qa.ndim == 1:
+            M, K = _elastic_linearization(rob, qa, coord)
+        else:  # a loop: outside jit the kernels fold the robot's constants, vmap would trace them
+            M, K = (jnp.stack(v) for v in zip(*(_elastic_linearization(rob, q, coord) for q in qa)))
+        return (M, K) if traced else (np.asarray(M), np.asarray(K))
 
-        def at(rob):
-            M = np.asarray(crba(rob, qa))[np.ix_(c, c)]
-            Kg = np.asarray(gravity_stiffness(rob, qa))[np.ix_(c, c)]
-            return M, Kg
+    @staticmethod
+    def _key(q0):
+        return tuple(np.round(np.asarray(q0, float), 12))
 
-        M, Kg = at(self.aug)
-        J = np.asarray(jacobian(self.aug, qa, tool, "local_world_aligned"))[:3][:, c]
-        dM = dKg = None
+    def mats(self, q0) -> PostureMats:
+        key = self._key(q0)
+        if key in self._cache:
+            return self._cache[key]
+        todo = {key: q0}
+        for q in self.postures:
+            if q.shape == np.shape(q0) and self._key(q) not in self._cache:
+                todo.setdefault(self._key(q), q)
+        QA = np.stack([self.posture(q) for q in todo.values()])
+        M, Kg = self._linearization(self.aug, QA)
+        tool = self._tool()
+        J = np.stack([np.asarray(jacobian(self.aug, jnp.asarray(qa), tool, "local_world_aligned"))[:3][:, self.coord] for qa in QA])
+        dM = dKg = [None] * len(QA)
         if self.structure.payload:
-            body, k = self.aug.frame_index(tool)
-            p = np.zeros(3) if k < 0 else np.asarray(self.aug.frame_p[k])
-            inert = np.asarray(self.aug.inertia).copy()
-            inert[body] += _point_mass(p)
-            M1, K1 = at(self.aug.replace(inertia=inert))
+            # the payload effect of a unit mass: its share of M and K_g (both linear in the mass)
+            body, unit = self._payload_params()
+            M1, K1 = self._linearization(Payload(unit, link=self.aug.link_names[body]).modify_robot(self.aug), QA)
             dM, dKg = M1 - M, K1 - Kg
-        out = PostureMats(M, Kg, J, dM, dKg)
-        self._cache[key] = out
-        return out
+        for b, k in enumerate(todo):
+            self._cache[k] = PostureMats(M[b], Kg[b], J[b], dM[b], dKg[b])
+        return self._cache[key]
 
     def _split(self, x):
         S = len(self.structure.springs)
@@ -249,21 +370,39 @@ class LinearModel:
         o = 2 * len(self.structure.springs) + int(self.structure.payload)
         return np.tanh(np.asarray(x, float)[o:o + len(self.pairs)])
 
-    def stiffness(self, x, P: PostureMats, omega):
-        """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,)."""
+    def stiffness_matrix(self, x) -> np.ndarray:
+        """The sites' static stiffness (S, S) [N m/rad], couplings included."""
+        k, _, _ = self._split(x)
+        K = np.diag(k)
+        for (a, b), r in zip(self.pairs, self.coupling(x)):
+            K[a, b] = K[b, a] = r * np.sqrt(k[a] * k[b])
+        return K
+
+    def model(self, x) -> Model:
+        """The :class:`jflex.Model` these parameters stand for: the augmented robot with the sites'
+        springs (:class:`jflex.effects.Spring`), each site's law on its own stiffness
+        (:class:`jflex.effects.StructuralDamping`) and the payload (:class:`jflex.effects.Payload`).
+        Hold :attr:`held` to analyse it as the diagnosis does."""
+        k, c, m = self._split(x)
+        names = list(self.aug.joint_names)
+        effects = [Spring([names[i] for i in self.coord], self.stiffness_matrix(x))]
+        for i, s in enumerate(self.structure.springs):
+            effects.append(StructuralDamping(jnp.array([[k[i]]]), with_loss(s.law, c[i] / k[i]), coords=(int(self.coord[i]),),
+                                             name=f"site{i}"))
+        if self.structure.payload:
+            body, unit = self._payload_params()
+            effects.append(Payload(m * unit, link=self.aug.link_names[body]))
+        return Model(self.aug, effects)
+
+    def stiffness(self, x, P: PostureMats, omega, tabulated: bool = False):
+        """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,) (``tabulated``: see
+        :func:`unit_loss`)."""
         k, c, m = self._split(x)
         M = P.M + (m * P.dM if P.dM is not None else 0.0)
         Kg = P.Kg + (m * P.dKg if P.dKg is not None else 0.0)
-        w = np.asarray(omega, float)[:, None]
-        d = np.empty((w.shape[0], len(k)), complex)
-        for i, s in enumerate(self.structure.springs):
-            if s.law == "viscous":
-                d[:, i] = k[i] + 1j * w[:, 0] * c[i]
-            elif s.law == "hysteretic":
-                d[:, i] = k[i] * (1 + 1j * c[i])
-            else:
-                d[:, i] = k[i] + c[i] * (1j * w[:, 0]) ** s.alpha
-        D = Kg[None] - w[:, :, None] ** 2 * M[None] + d[:, :, None] * np.eye(len(k))[None]
+        w = np.asarray(omega, float)
+        d = np.stack([k[i] + c[i] * unit_loss(s.law, w, tabulated) for i, s in enumerate(self.structure.springs)], axis=1)
+        D = Kg[None] - w[:, None, None] ** 2 * M[None] + d[:, :, None] * np.eye(len(k))[None]
         for (a, b), r in zip(self.pairs, self.coupling(x)):
             D[:, a, b] += r * np.sqrt(k[a] * k[b])
             D[:, b, a] += r * np.sqrt(k[a] * k[b])
@@ -304,14 +443,8 @@ class LinearModel:
             dH[p] -= v[:, None, None] * (Lt[:, a, :, None] * G[:, b, None, :] + Lt[:, b, :, None] * G[:, a, None, :])
 
         for i, sp in enumerate(self.structure.springs):
-            if sp.law == "viscous":
-                dk, dc = np.full(w.size, k[i], complex), 1j * w * c[i]
-            elif sp.law == "hysteretic":
-                dk, dc = np.full(w.size, k[i] * (1 + 1j * c[i])), np.full(w.size, 1j * k[i] * c[i])
-            else:
-                dk, dc = np.full(w.size, k[i], complex), c[i] * (1j * w) ** sp.alpha
-            diag(i, i, dk)
-            diag(S + i, i, dc)
+            diag(i, i, np.full(w.size, k[i], complex))  # d(k + c psi) / d log k
+            diag(S + i, i, c[i] * unit_loss(sp.law, w))  # d(k + c psi) / d log c
         o = 2 * S
         if self.structure.payload:
             dD = m * (P.dKg[None] - w[:, None, None] ** 2 * P.dM[None])
@@ -335,18 +468,18 @@ class LinearModel:
         S = len(self.structure.springs)
         if S == 0:
             return np.zeros(0), np.zeros(0)
-        frac = any(s.law == "fractional" for s in self.structure.springs)
+        frac = any(frequency_dependent(s.law) for s in self.structure.springs)
         w_ref = 2 * np.pi * 10.0
-        D, M = self.stiffness(x, P, np.array([w_ref]))
+        D, M = self.stiffness(x, P, np.array([w_ref]), True)
         lam, V = _gen_eig(D[0].real + w_ref**2 * M, M)
         w = np.sqrt(np.maximum(lam, 1e-12))
         for _ in range(4 if frac else 1):
-            D, M = self.stiffness(x, P, w)
+            D, M = self.stiffness(x, P, w, True)
             K = D.real + (w**2)[:, None, None] * M[None]
             num = np.einsum("ir,rij,jr->r", V, K, V)
             den = np.einsum("ir,ij,jr->r", V, M, V)
             w = np.sqrt(np.maximum(num / den, 1e-12))
-        D, M = self.stiffness(x, P, w)
+        D, M = self.stiffness(x, P, w, True)
         z = np.einsum("ir,rij,jr->r", V, D.imag, V) / (2 * w**2 * np.einsum("ir,ij,jr->r", V, M, V))
         o = np.argsort(w)
         return w[o] / (2 * np.pi), z[o]
@@ -394,7 +527,7 @@ def match_modes(f_model, f_meas, return_assigned: bool = False):
 DAMPING_WEIGHT = 0.1  # a 10 % damping-ratio misfit counts like a 1 % frequency misfit
 
 
-def modal_errors(lm: LinearModel, x, arr, fitting: bool = False):
+def modal_errors(lm: FrequencyModel, x, arr, fitting: bool = False):
     """Relative frequency and damping errors of a modal table. When ``fitting``, measured modes
     left over after the one-to-one assignment (the model has fewer modes) do not pull the fit:
     they are the gap a candidate must explain, not something the nominal stiffness should
@@ -456,7 +589,7 @@ FIT_TOL = 1e-6
 FIT_STRIDE = 4  # every 3rd frequency of a measured FRF enters the fit (peaks stay resolved)
 
 
-def residual(lm: LinearModel, x, train, peaks_only: bool = False, peaks: bool = True) -> np.ndarray:
+def residual(lm: FrequencyModel, x, train, peaks_only: bool = False, peaks: bool = True) -> np.ndarray:
     """Stacked fitting residual of the training FRF and modal sets: FRFs as the complex error
     normalised by the set's RMS magnitude over its entries, i.e. the FRF NRMSE the gap is judged
     by (a log-ratio misfit was tried and preferred sharp misplaced peaks; a per-entry
@@ -498,7 +631,7 @@ def residual(lm: LinearModel, x, train, peaks_only: bool = False, peaks: bool = 
     return np.where(np.isfinite(r), r, 1e3)
 
 
-def residual_jacobian(lm: LinearModel, x, train):
+def residual_jacobian(lm: FrequencyModel, x, train):
     """:func:`residual` without the peaks (``peaks=False``) and its Jacobian in ``x``, for training
     sets that are all FRFs (None otherwise: modal tables go by finite differences)."""
     if not train or any(d.kind != "frf" for d in train):
@@ -524,7 +657,7 @@ def residual_jacobian(lm: LinearModel, x, train):
     return r, Jr
 
 
-def fit_linear(lm: LinearModel, x0, train, free=None, starts=(), peaks_first: bool = True):
+def fit_linear(lm: FrequencyModel, x0, train, free=None, starts=(), peaks_first: bool = True):
     """Nonlinear least squares (log parameters) from ``x0`` and extra starting points ``starts``;
     ``free`` masks the parameters to fit (the rest held); ``peaks_first``: a first phase on the
     picked peaks alone (for starts whose modes may lie far from the measured ones)."""
