@@ -290,6 +290,11 @@ def test_a_damping_law_defined_outside_gap_is_a_frequency_candidate():
     assert law_candidates()["ring_damping"] is Ring
     w = np.array([4.0, 100.0])
     np.testing.assert_allclose(L.unit_loss(Ring(), w), 1j * np.sqrt(w), rtol=1e-12)
+    # the modal iteration's table: exact on power laws, within its stated 1e-5 on others
+    wm = np.array([0.37, 12.3, 4567.0])
+    np.testing.assert_allclose(L.unit_loss(Ring(), wm, tabulated=True), 1j * np.sqrt(wm), rtol=1e-5)
+    for law in (jflex.effects.KelvinVoigt(1.0), jflex.effects.Hysteretic(eta=1.0), jflex.effects.Fractional(1.0, 0.37)):
+        np.testing.assert_allclose(L.unit_loss(law, wm, tabulated=True), L.unit_loss(law, wm), rtol=1e-9)
 
 
 def test_coupled_virtual_pair_equals_full_spd_stiffness(rotor_case):
