@@ -304,6 +304,7 @@ class FrequencyModel:
         elastic = set(int(c) for c in self.coord)
         self.held = tuple(nm for i, nm in enumerate(self.aug.joint_names) if i not in elastic)
         self._cache = {}
+        self._psi_cache = {}
 
     def _tool(self):
         return self.tool if self.tool is not None else self.aug.link_names[-1]
@@ -358,12 +359,15 @@ class FrequencyModel:
         return self._cache[key]
 
     def _split(self, x):
+        x = np.asarray(x, float)
+        last = getattr(self, "_last_split", None)
+        if last is not None and last[0].shape == x.shape and np.array_equal(last[0], x):
+            return last[1]  # a fit evaluates every posture and data set at one x
         S = len(self.structure.springs)
-        x = np.clip(x, -60.0, 60.0)  # log parameters: keep exp() finite while the solver explores
-        k = np.exp(x[:S])
-        c = np.exp(x[S:2 * S])
-        m = np.exp(x[2 * S]) if self.structure.payload else 0.0
-        return k, c, m
+        xc = np.clip(x, -60.0, 60.0)  # log parameters: keep exp() finite while the solver explores
+        out = (np.exp(xc[:S]), np.exp(xc[S:2 * S]), np.exp(xc[2 * S]) if self.structure.payload else 0.0)
+        self._last_split = (x.copy(), out)
+        return out
 
     def coupling(self, x):
         """``r`` (in (-1, 1)) of each coupled pair."""
@@ -394,18 +398,43 @@ class FrequencyModel:
             effects.append(Payload(m * unit, link=self.aug.link_names[body]))
         return Model(self.aug, effects)
 
+    def _psi(self, w, tabulated: bool = False):
+        """(F, S) unit loss of every site's law at ``w`` (F,): one lookup per grid, one law
+        evaluation per distinct law (a fit asks for the same grids hundreds of thousands of times)."""
+        ck = None if tabulated else (w.shape, w.tobytes())  # a modal iteration's w never recurs
+        hit = self._psi_cache.get(ck)
+        if hit is None:
+            laws = {}
+            for sp in self.structure.springs:
+                laws.setdefault(id(sp.law), sp.law)
+            vals = {i: unit_loss(law, w, tabulated) for i, law in laws.items()}
+            hit = np.stack([vals[id(sp.law)] for sp in self.structure.springs], axis=-1) if self.structure.springs else np.zeros(w.shape + (0,), complex)
+            if ck is not None:
+                if len(self._psi_cache) > 256:
+                    self._psi_cache.clear()
+                self._psi_cache[ck] = hit
+        return hit
+
     def stiffness(self, x, P: PostureMats, omega, tabulated: bool = False):
         """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,) (``tabulated``: see
         :func:`unit_loss`)."""
         k, c, m = self._split(x)
-        M = P.M + (m * P.dM if P.dM is not None else 0.0)
-        Kg = P.Kg + (m * P.dKg if P.dKg is not None else 0.0)
+        M, Kg = P.M, P.Kg
+        if P.dM is not None and m:
+            M, Kg = M + m * P.dM, Kg + m * P.dKg
         w = np.asarray(omega, float)
-        d = np.stack([k[i] + c[i] * unit_loss(s.law, w, tabulated) for i, s in enumerate(self.structure.springs)], axis=1)
-        D = Kg[None] - w[:, None, None] ** 2 * M[None] + d[:, :, None] * np.eye(len(k))[None]
+        S = len(k)
+        # the static part (K_g, couplings) once, then the frequency-dependent terms on the (F, S, S)
+        K0 = np.array(Kg, float)
         for (a, b), r in zip(self.pairs, self.coupling(x)):
-            D[:, a, b] += r * np.sqrt(k[a] * k[b])
-            D[:, b, a] += r * np.sqrt(k[a] * k[b])
+            K0[a, b] += r * np.sqrt(k[a] * k[b])
+            K0[b, a] += r * np.sqrt(k[a] * k[b])
+        D = np.empty((w.size, S, S), complex)
+        np.multiply((w * w)[:, None, None], -M, out=D.real)
+        D.real[:] += K0
+        D.imag[:] = 0.0
+        i = np.arange(S)
+        D[:, i, i] += k + c * self._psi(w, tabulated)
         return D, M
 
     @_quiet
@@ -442,9 +471,10 @@ class FrequencyModel:
         def offdiag(p, a, b, v):  # dD = v at (a, b) and (b, a)
             dH[p] -= v[:, None, None] * (Lt[:, a, :, None] * G[:, b, None, :] + Lt[:, b, :, None] * G[:, a, None, :])
 
+        psi = self._psi(w)
         for i, sp in enumerate(self.structure.springs):
             diag(i, i, np.full(w.size, k[i], complex))  # d(k + c psi) / d log k
-            diag(S + i, i, c[i] * unit_loss(sp.law, w))  # d(k + c psi) / d log c
+            diag(S + i, i, c[i] * psi[:, i])  # d(k + c psi) / d log c
         o = 2 * S
         if self.structure.payload:
             dD = m * (P.dKg[None] - w[:, None, None] ** 2 * P.dM[None])
@@ -556,6 +586,16 @@ def frf_entries(H):
     return s > 1e-3 * s.max()
 
 
+def _frf_norm(a):
+    """(entries used, normalisation) of a measured FRF set's residual, kept with its arrays."""
+    if "_norm" not in a:
+        H = a["H"]
+        s, ok = frf_scale(H), frf_entries(H)
+        n = len(H[::FIT_STRIDE])
+        a["_norm"] = (ok, np.sqrt(np.mean(s[ok] ** 2)) * np.sqrt(n * ok.sum()))
+    return a["_norm"]
+
+
 def frf_peaks(freq, H, prominence=0.03):
     """Peaks of the summed normalised magnitude of a measured FRF: (f [Hz], zeta) by peak picking,
     parabolic refinement and the half-power bandwidth (NaN when a half-power point is off the grid)."""
@@ -586,7 +626,7 @@ RECENTRE = 2  # times the FRF phase may move its box to a stiffness that ended o
 # default ran most FRF fits to their evaluation cap (modal-table fits are cheap and keep it: their few
 # residuals leave flat directions that stopped early at 1e-6, e.g. seed 003's KR90 bearing 9.0 -> 9.6 %)
 FIT_TOL = 1e-6
-FIT_STRIDE = 4  # every 3rd frequency of a measured FRF enters the fit (peaks stay resolved)
+FIT_STRIDE = 4  # every 4th frequency of a measured FRF enters the fit (peaks stay resolved)
 
 
 def residual(lm: FrequencyModel, x, train, peaks_only: bool = False, peaks: bool = True) -> np.ndarray:
@@ -605,10 +645,8 @@ def residual(lm: FrequencyModel, x, train, peaks_only: bool = False, peaks: bool
             sl = slice(None, None, FIT_STRIDE)
             H = a["H"][sl]
             Hm = lm.frf(x, a["q0"], a["freq"][sl])
-            s = frf_scale(a["H"])
-            ok = frf_entries(a["H"])
-            Hm, H = Hm[:, ok], H[:, ok]
-            e = (Hm - H) / np.sqrt(np.mean(s[ok] ** 2)) / np.sqrt(H.size)
+            ok, norm = _frf_norm(a)
+            e = (Hm[:, ok] - H[:, ok]) / norm
             if peaks_only:
                 e = e[:0]
             if peaks and "_peaks" not in a:
@@ -642,9 +680,7 @@ def residual_jacobian(lm: FrequencyModel, x, train):
         sl = slice(None, None, FIT_STRIDE)
         H = a["H"][sl]
         Hm, dH = lm.frf_jacobian(x, a["q0"], a["freq"][sl])
-        s = frf_scale(a["H"])
-        ok = frf_entries(a["H"])
-        norm = np.sqrt(np.mean(s[ok] ** 2)) * np.sqrt(H[:, ok].size)
+        ok, norm = _frf_norm(a)
         e = (Hm[:, ok] - H[:, ok]) / norm
         de = dH[:, :, ok] / norm
         rows += [e.real.ravel(), e.imag.ravel()]

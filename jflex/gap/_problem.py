@@ -392,7 +392,8 @@ class Problem:
                 nk, nc = [], []
                 for s in range(len(new)):
                     ii = S + s
-                    me = max(P.M[ii, ii] - P.M[ii, :S] @ np.linalg.solve(P0, P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
+                    # (pinv: a site carrying no inertia of its own leaves P0 singular)
+                    me = max(P.M[ii, ii] - P.M[ii, :S] @ (np.linalg.pinv(P0) @ P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
                     k = scale * (2 * np.pi * ft) ** 2 * me * (1.0 + 0.5 * s)
                     nk.append(np.log(k))
                     nc.append(np.log(2 * 0.02 * np.sqrt(k * me)))
