@@ -561,7 +561,9 @@ def fit(
     ms = _as_multistart(multistart)
     if stall is not None and int(stall) < 1:
         raise ParameterError(f"fit: stall must be None or a number of steps >= 1, got {stall}")
-    u0 = spec.pack(pair)
+    # strongly typed: a start packed from Python floats is weakly typed, and the solver's first
+    # iterate (strong) would compile the residual and Jacobian a second time
+    u0 = jnp.asarray(spec.pack(pair), dtype=jnp.result_type(float))
 
     def resid_parts(u):
         m, d = spec.apply(pair, u)
