@@ -183,7 +183,8 @@ def diagnosed_variant(rob, base_model, diag, hold, q_case):
         fx.append(jflex.effects.FlexibleJoints(np.diag(Kx) if free_added else Kx, c[extra], rotor_inertia=np.zeros(len(extra)),
                                                gear_ratio=np.ones(len(extra)), joints=idx, coupling=False))
         added = [dict(spring=f"{springs[i].kind}@{names[int(lm.coord[i])]}", stiffness_N_m_per_rad=float(k[i]),
-                      damping_N_m_s_per_rad=float(c[i]), law=springs[i].law) for i in extra]
+                      damping_N_m_s_per_rad=float(c[i]),
+                      law=type(springs[i].law).candidate or "viscous") for i in extra]  # the diagnosis' law name
     if rob.cfg.get("gravity_compensator", True):
         fx.append(jflex.effects.FourierGravityCompensator(rob.psi[18:21], joint=main[1]))
     springy = set(main) | {int(lm.coord[i]) for i in extra}
