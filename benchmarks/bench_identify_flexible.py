@@ -72,10 +72,11 @@ def main(argv=None):
     ap.add_argument("--max-steps", type=int, default=200)
     ap.add_argument("--jac", default="fwd", choices=["fwd", "bwd"], help="optimistix Jacobian mode (its option 'jac')")
     ap.add_argument("--scipy-methods", nargs="+", default=["lm", "trf"], choices=["lm", "trf", "dogbox"])
-    ap.add_argument("--solvers", nargs="+", default=["jflex-lm", "optx-lm", "optx-gn", "optx-indirect-lm"],
+    ap.add_argument("--solvers", nargs="+", default=["jflex-lm", "optx-lm", "optx-gn"],
                     choices=["jflex-lm", "optx-lm", "optx-gn", "optx-indirect-lm"],
                     help="exact-Jacobian rows (the first is the reference of the cost differences); optx.Dogleg is left "
-                         "out: it hung (all threads idle in a futex wait) on this machine")
+                         "out, and optx-indirect-lm is off by default: at 5 postures both hung in XLA:CPU's Execute (all threads "
+                         "idle in a futex wait, jax 0.10.2) on this machine")
     a = ap.parse_args(argv)
 
     robot = jflex.load_robot("ur5")
@@ -128,6 +129,32 @@ def main(argv=None):
         return 0.5 * float(np.sum(np.asarray(r_jit(jnp.asarray(u))) ** 2))
 
     c_true = cost(truth)
+    print(f"[progress] residual {1e3 * t_res:.1f} ms, Jacobian {1e3 * t_jac:.1f} ms", flush=True)
+
+    # --- scipy: FD Jacobians on the same jitted residual ---------------------------------------------
+    calls = [0]
+
+    def fun(u):
+        calls[0] += 1
+        return np.asarray(r_jit(jnp.asarray(u)))
+
+    srows = []
+    n = u0.shape[0]
+    for meth in a.scipy_methods:
+        kw = dict(x_scale="jac") if meth != "lm" else dict(x_scale=1.0)
+        runs = []
+        for _ in range(a.repeat):
+            calls[0] = 0
+            t0 = time.perf_counter()
+            ls = scipy.optimize.least_squares(fun, np.asarray(u0), method=meth, xtol=a.tol, ftol=a.tol, gtol=a.tol,
+                                              max_nfev=100 * a.max_steps, **kw)
+            runs.append((time.perf_counter() - t0, ls, calls[0]))
+        t_s, ls, ev = min(runs, key=lambda x: x[0])
+        print(f"[progress] scipy {meth}: best {t_s:.3f} s, {ls.nfev} trial points", flush=True)
+        njev = ls.njev if ls.njev is not None else (ev - ls.nfev) // n
+        srows.append(dict(label=f"scipy least_squares {meth} ({'x_scale jac' if meth != 'lm' else 'x_scale 1'}), FD Jacobian",
+                          t=t_s, comp=compile_res, steps=njev, trial=ls.nfev, evals=str(ev), cost=cost(ls.x),
+                          err=float(np.abs(ls.x - truth).max()), u=np.asarray(ls.x), stop=f"status {ls.status}"))
 
     # --- jflex: exact Jacobians, whole solve jitted -------------------------------------------------
     make = {"jflex-lm": ("jflex LM (expand 0.75), exact fwd-AD Jacobian", lambda: idf.levenberg_marquardt(rtol=a.tol, atol=a.tol)),
@@ -151,33 +178,10 @@ def main(argv=None):
             sol = jax.block_until_ready(solve(u0))
             times.append(time.perf_counter() - t0)
         u = np.asarray(sol[0])
+        print(f"[progress] {label}: best {min(times):.3f} s, {int(sol[1])} steps", flush=True)
         jrows.append(dict(label=label, t=min(times), comp=first - min(times), steps=int(sol[1]), evals=f"{int(sol[1])} r+J",
                           cost=cost(u), err=float(np.abs(u - truth).max()), u=u,
                           stop="successful" if bool(sol[2]) else "max_steps/failed"))
-
-    # --- scipy: FD Jacobians on the same jitted residual ---------------------------------------------
-    calls = [0]
-
-    def fun(u):
-        calls[0] += 1
-        return np.asarray(r_jit(jnp.asarray(u)))
-
-    srows = []
-    n = u0.shape[0]
-    for meth in a.scipy_methods:
-        kw = dict(x_scale="jac") if meth != "lm" else dict(x_scale=1.0)
-        runs = []
-        for _ in range(a.repeat):
-            calls[0] = 0
-            t0 = time.perf_counter()
-            ls = scipy.optimize.least_squares(fun, np.asarray(u0), method=meth, xtol=a.tol, ftol=a.tol, gtol=a.tol,
-                                              max_nfev=100 * a.max_steps, **kw)
-            runs.append((time.perf_counter() - t0, ls, calls[0]))
-        t_s, ls, ev = min(runs, key=lambda x: x[0])
-        njev = ls.njev if ls.njev is not None else (ev - ls.nfev) // n
-        srows.append(dict(label=f"scipy least_squares {meth} ({'x_scale jac' if meth != 'lm' else 'x_scale 1'}), FD Jacobian",
-                          t=t_s, comp=compile_res, steps=njev, trial=ls.nfev, evals=str(ev), cost=cost(ls.x),
-                          err=float(np.abs(ls.x - truth).max()), u=np.asarray(ls.x), stop=f"status {ls.status}"))
 
     # --- table ---------------------------------------------------------------------------------------
     ref = jrows[0]
@@ -190,7 +194,7 @@ def main(argv=None):
           + f"); motor-side rigid/gravity modes <= {rigid.max():.2f} Hz")
     print(f"start: +/-50 % (K x {sgn.tolist()}, C x {sgn[::-1].tolist()}, I_m x {sgn.tolist()}); cost at start {cost(u0):.6e}, "
           f"at the truth {c_true:.6e}; Jacobian at the start: singular values {sv[0]:.2e} .. {sv[-1]:.2e} (cond {sv[0] / sv[-1]:.1e})")
-    hdr = (f"| {'solver':52s} | time [s] | compile [s] | iterations | residual evals | final cost | rel. cost diff vs jflex LM "
+    hdr = (f"| {'solver':52s} | time [s] | compile [s] | iterations | residual evals | final cost | rel. cost diff vs 1st row"
            f"| max abs(u - u_true) | max abs(u - u_jflex) | stop |")
     print(hdr)
     print("|" + "|".join("-" * len(c) for c in hdr.split("|")[1:-1]) + "|")
