@@ -20,6 +20,8 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._errors import ShapeError
+
 
 class Slots(NamedTuple):
     """Where an effect's pieces sit in the model vectors (static, hashable).
@@ -102,3 +104,19 @@ class AbstractEffect(eqx.Module):
         (fractional, hysteretic). ``None`` (default) means: use the linearisation of
         ``generalized_force``, i.e. ``-df/dx - i omega df/dxd``."""
         return None
+
+
+def joint_indices(robot, joints, who: str) -> tuple[int, ...]:
+    """Indices (static) of ``joints``, names or indices, in ``robot``; ``who`` names the effect in
+    the error for an unknown name or an index out of range."""
+    out = []
+    for j in joints:
+        if isinstance(j, str):
+            if j not in robot.joint_names:
+                raise ShapeError(f"{who}: unknown joint '{j}'; joints: {list(robot.joint_names)}")
+            out.append(robot.joint_names.index(j))
+        else:
+            if not 0 <= int(j) < robot.nq:
+                raise ShapeError(f"{who}: joint index {int(j)} out of range for a robot with {robot.nq} joints")
+            out.append(int(j))
+    return tuple(out)

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ParameterError, ShapeError
-from ._base import AbstractEffect, Slots
+from ._base import AbstractEffect, Slots, joint_indices
 
 
 class JointFriction(AbstractEffect):
@@ -47,10 +47,7 @@ class JointFriction(AbstractEffect):
         self.smoothing = arr(smoothing, "smoothing", strict=True)
 
     def _idx(self, robot):
-        for j in self.joints:
-            if j not in robot.joint_names:
-                raise ShapeError(f"JointFriction: unknown joint '{j}'; joints: {list(robot.joint_names)}")
-        return jnp.array([robot.joint_names.index(j) for j in self.joints])
+        return jnp.array(joint_indices(robot, self.joints, "JointFriction"))
 
     def torque(self, qd):
         """Friction torque (k,) [N m] at joint rates ``qd`` (k,) [rad/s] (sign: resisting)."""

@@ -12,19 +12,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ParameterError, ShapeError
-from ._base import AbstractEffect, Slots
+from ._base import AbstractEffect, Slots, joint_indices
 from ._flexible_joint import _concrete
 
 
 def _joint_index(robot, joint) -> int:
-    if isinstance(joint, str):
-        if joint not in robot.joint_names:
-            raise ShapeError(f"gravity compensator: unknown joint '{joint}'; joints: {list(robot.joint_names)}")
-        return robot.joint_names.index(joint)
-    j = int(joint)
-    if not 0 <= j < robot.nq:
-        raise ShapeError(f"gravity compensator: joint index {j} out of range for a robot with {robot.nq} joints")
-    return j
+    return joint_indices(robot, (joint,), "gravity compensator")[0]
 
 
 class FourierGravityCompensator(AbstractEffect):

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ParameterError, ShapeError
-from ._base import AbstractEffect, Slots
+from ._base import AbstractEffect, Slots, joint_indices
 from ._flexible_joint import _concrete
 
 
@@ -32,10 +32,7 @@ class RotorInertia(AbstractEffect):
         self.inertia = a
 
     def _idx(self, robot):
-        for j in self.joints:
-            if j not in robot.joint_names:
-                raise ShapeError(f"RotorInertia: unknown joint '{j}'; joints: {list(robot.joint_names)}")
-        return jnp.array([robot.joint_names.index(j) for j in self.joints])
+        return jnp.array(joint_indices(robot, self.joints, "RotorInertia"))
 
     def kinetic_energy(self, robot, slots: Slots, x, xd):
         return 0.5 * jnp.sum(self.inertia * xd[self._idx(robot)] ** 2)

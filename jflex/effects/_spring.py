@@ -15,7 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ParameterError, ShapeError
-from ._base import AbstractEffect, Slots
+from ._base import AbstractEffect, Slots, joint_indices
+from ._flexible_joint import _concrete
 from ._damping import AbstractDampingLaw
 
 
@@ -40,10 +41,7 @@ class Spring(AbstractEffect):
             K = jnp.diag(K)
         if K.shape != (m, m):
             raise ShapeError(f"Spring.stiffness: expected ({m},) or ({m}, {m}) for coords {self.coords}, got {K.shape}")
-        try:
-            Kn = np.asarray(K)
-        except Exception:  # traced (a fit): checked where it was concrete
-            Kn = None
+        Kn = _concrete(K)
         if Kn is not None and (not np.all(np.isfinite(Kn)) or not np.allclose(Kn, Kn.T)
                                or np.linalg.eigvalsh(0.5 * (Kn + Kn.T)).min() <= 0):
             raise ParameterError(f"Spring.stiffness: must be finite, symmetric and positive definite [N m/rad], got {Kn.tolist()}")
@@ -52,15 +50,7 @@ class Spring(AbstractEffect):
         self.stiffness, self.law, self.name = K, law, name
 
     def _idx(self, robot):
-        out = []
-        for c in self.coords:
-            if isinstance(c, str):
-                if c not in robot.joint_names:
-                    raise ShapeError(f"Spring: unknown joint '{c}'; joints: {list(robot.joint_names)}")
-                out.append(robot.joint_names.index(c))
-            else:
-                out.append(c)
-        return jnp.array(out, dtype=int)
+        return jnp.array(joint_indices(robot, self.coords, "Spring"), dtype=int)
 
     def state_names(self, robot):
         if self.law is None:
