@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import has_inertia
-from ._dynamics import _crba, _rnea, forward_kinematics, gravity
+from ._dynamics import _crba, _rnea, forward_kinematics
 from ._errors import ShapeError
 from ._robot import PRISMATIC, Robot
 from ._tree import support
