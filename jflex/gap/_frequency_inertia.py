@@ -57,7 +57,7 @@ class _Shifted(L.FrequencyModel):
         self._basis = {}
         self.delta = np.zeros(10 * lm.robot.nq)
         self._cache = {}
-        self._psi_cache, self.postures = lm._psi_cache, lm.postures
+        self._psi_cache = lm._psi_cache
 
     def basis(self, q0):
         key = tuple(np.round(np.asarray(q0, float), 12))

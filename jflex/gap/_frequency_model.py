@@ -295,10 +295,8 @@ class FrequencyModel:
     ``[log k_s, log c_s for each site, log m_payload, atanh r of each coupled pair]``
     (``c_s = k_s theta_s`` the loss stiffness of the site's law)."""
 
-    def __init__(self, robot, structure: Structure, tool_frame, postures=()):
+    def __init__(self, robot, structure: Structure, tool_frame):
         self.robot, self.structure, self.tool = robot, structure, tool_frame
-        # the postures the data hold: the matrices of all of them are computed at the first request
-        self.postures = [np.asarray(q, float) for q in postures]
         self.aug, self.coord, self.model_index = augment(robot, structure.springs)
         self.pairs = structure.pairs()
         elastic = set(int(c) for c in self.coord)
@@ -323,40 +321,26 @@ class FrequencyModel:
 
     def _linearization(self, rob, qa, traced: bool = False):
         """``(M, K_g)`` over the elastic coordinates, in site order: the linearisation of the rigid
-        augmented robot ``rob`` with every other joint held (``qa`` (nq,) or a batch (B, nq))."""
-        coord = tuple(int(c) for c in self.coord)
-        qa = jnp.asarray(qa)
-        if qa.ndim == 1:
-            M, K = _elastic_linearization(rob, qa, coord)
-        else:  # a loop: outside jit the kernels fold the robot's constants, vmap would trace them
-            M, K = (jnp.stack(v) for v in zip(*(_elastic_linearization(rob, q, coord) for q in qa)))
+        augmented robot ``rob`` with every other joint held."""
+        M, K = _elastic_linearization(rob, jnp.asarray(qa), tuple(int(c) for c in self.coord))
         return (M, K) if traced else (np.asarray(M), np.asarray(K))
 
-    @staticmethod
-    def _key(q0):
-        return tuple(np.round(np.asarray(q0, float), 12))
-
     def mats(self, q0) -> PostureMats:
-        key = self._key(q0)
+        key = tuple(np.round(np.asarray(q0, float), 12))
         if key in self._cache:
             return self._cache[key]
-        todo = {key: q0}
-        for q in self.postures:
-            if q.shape == np.shape(q0) and self._key(q) not in self._cache:
-                todo.setdefault(self._key(q), q)
-        QA = np.stack([self.posture(q) for q in todo.values()])
-        M, Kg = self._linearization(self.aug, QA)
-        tool = self._tool()
-        J = np.stack([np.asarray(jacobian(self.aug, jnp.asarray(qa), tool, "local_world_aligned"))[:3][:, self.coord] for qa in QA])
-        dM = dKg = [None] * len(QA)
+        qa = self.posture(q0)
+        M, Kg = self._linearization(self.aug, qa)
+        J = np.asarray(jacobian(self.aug, jnp.asarray(qa), self._tool(), "local_world_aligned"))[:3][:, self.coord]
+        dM = dKg = None
         if self.structure.payload:
             # the payload effect of a unit mass: its share of M and K_g (both linear in the mass)
             body, unit = self._payload_params()
-            M1, K1 = self._linearization(Payload(unit, link=self.aug.link_names[body]).modify_robot(self.aug), QA)
+            M1, K1 = self._linearization(Payload(unit, link=self.aug.link_names[body]).modify_robot(self.aug), qa)
             dM, dKg = M1 - M, K1 - Kg
-        for b, k in enumerate(todo):
-            self._cache[k] = PostureMats(M[b], Kg[b], J[b], dM[b], dKg[b])
-        return self._cache[key]
+        out = PostureMats(M, Kg, J, dM, dKg)
+        self._cache[key] = out
+        return out
 
     def _split(self, x):
         x = np.asarray(x, float)

@@ -420,8 +420,7 @@ class Problem:
         return lm2, best[1]
 
     def _frequency_model(self, robot, structure):
-        return L.FrequencyModel(robot, structure, self.case.tool_frame,
-                                postures=[d.arrays["q0"] for d in self.ftrain + self.fval])
+        return L.FrequencyModel(robot, structure, self.case.tool_frame)
 
     def _ref_posture(self):
         return self.ftrain[0].arrays["q0"]
