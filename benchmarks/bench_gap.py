@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import shutil
 import sys
 
 import jflex
@@ -31,7 +30,23 @@ def main(argv=None):
     print(f"top-1 {s['top1']:.0%}  top-2 {s['top2']:.0%}  median shrink {s['median_shrink']:.0f} %  "
           f"false alarms {s['false_alarm_rate']:.0%}  ({s['cases']} cases, median {s['median_seconds']:.1f} s/case)")
     if args.size == "full":
-        shutil.copy(run / "bench.md", pathlib.Path(__file__).with_name("bench_gap_results.md"))
+        write_section(pathlib.Path(__file__).with_name("bench_gap_results.md"), (run / "bench.md").read_text())
+
+
+BEGIN, END = "<!-- jflex-family:begin", "<!-- jflex-family:end -->"
+
+
+def write_section(path, md):
+    """Put this family's table between its markers in the results file; the other families'
+    sections and the sessions' notes stay (a whole-file copy once erased the independent family)."""
+    text = path.read_text() if path.exists() else f"# gap-bench\n\n{BEGIN} -->\n{END}\n"
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{path}: no '{BEGIN} ... {END}' markers; add them where the jflex family's table goes")
+    head, rest = text.split(BEGIN, 1)
+    opening, _ = rest.split("\n", 1)
+    _, tail = rest.split(END, 1)
+    body = md.replace("# gap-bench\n", "", 1).strip()
+    path.write_text(f"{head}{BEGIN}{opening}\n{body}\n{END}{tail}")
 
 
 if __name__ == "__main__":
