@@ -248,6 +248,16 @@ class PostureMats:
     J: np.ndarray
     dM: np.ndarray | None
     dKg: np.ndarray | None
+    # derived, law-independent arrays a fit asks for again and again (per frequency grid): see
+    # FrequencyModel._grid; and whether every matrix is exactly symmetric (then D is too, and
+    # D^T's solve is D's)
+    derived: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
+
+    def symmetric(self) -> bool:
+        s = self.derived.get("sym")
+        if s is None:
+            s = self.derived["sym"] = bool(all(a is None or np.array_equal(a, a.T) for a in (self.M, self.Kg, self.dM, self.dKg)))
+        return s
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -326,8 +336,14 @@ class FrequencyModel:
         return (M, K) if traced else (np.asarray(M), np.asarray(K))
 
     def mats(self, q0) -> PostureMats:
-        key = tuple(np.round(np.asarray(q0, float), 12))
+        q0 = np.asarray(q0, float)
+        fast = q0.tobytes()  # the exact posture array a fit passes again and again (a bytes key:
+        hit = self._cache.get(fast)  # no clash with the rounded tuple keys in the same dict)
+        if hit is not None:
+            return hit
+        key = tuple(np.round(q0, 12))
         if key in self._cache:
+            self._cache[fast] = self._cache[key]
             return self._cache[key]
         qa = self.posture(q0)
         M, Kg = self._linearization(self.aug, qa)
@@ -339,18 +355,19 @@ class FrequencyModel:
             M1, K1 = self._linearization(Payload(unit, link=self.aug.link_names[body]).modify_robot(self.aug), qa)
             dM, dKg = M1 - M, K1 - Kg
         out = PostureMats(M, Kg, J, dM, dKg)
-        self._cache[key] = out
+        self._cache[key] = self._cache[fast] = out
         return out
 
     def _split(self, x):
         x = np.asarray(x, float)
+        xb = x.tobytes()
         last = getattr(self, "_last_split", None)
-        if last is not None and last[0].shape == x.shape and np.array_equal(last[0], x):
+        if last is not None and last[0] == xb:
             return last[1]  # a fit evaluates every posture and data set at one x
         S = len(self.structure.springs)
         xc = np.clip(x, -60.0, 60.0)  # log parameters: keep exp() finite while the solver explores
         out = (np.exp(xc[:S]), np.exp(xc[S:2 * S]), np.exp(xc[2 * S]) if self.structure.payload else 0.0)
-        self._last_split = (x.copy(), out)
+        self._last_split = (xb, out)
         return out
 
     def coupling(self, x):
@@ -399,27 +416,69 @@ class FrequencyModel:
                 self._psi_cache[ck] = hit
         return hit
 
-    def stiffness(self, x, P: PostureMats, omega, tabulated: bool = False):
-        """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,) (``tabulated``: see
-        :func:`unit_loss`)."""
+    def _static(self, x, P: PostureMats):
+        """``(K_0, M)`` at ``x``: the frequency-independent stiffness (``K_g`` with the payload's
+        share, the pairs' couplings) and the mass matrix."""
         k, c, m = self._split(x)
         M, Kg = P.M, P.Kg
         if P.dM is not None and m:
             M, Kg = M + m * P.dM, Kg + m * P.dKg
-        w = np.asarray(omega, float)
-        S = len(k)
-        # the static part (K_g, couplings) once, then the frequency-dependent terms on the (F, S, S)
         K0 = np.array(Kg, float)
         for (a, b), r in zip(self.pairs, self.coupling(x)):
             K0[a, b] += r * np.sqrt(k[a] * k[b])
             K0[b, a] += r * np.sqrt(k[a] * k[b])
+        return K0, M
+
+    @staticmethod
+    def _grid(P: PostureMats, key, make):
+        """A law-independent array of posture ``P`` on a data grid, made once (a fit asks for the
+        same few grids hundreds of thousands of times)."""
+        g = P.derived.setdefault("grid", {})
+        hit = g.get(key)
+        if hit is None:
+            if len(g) > 64:
+                g.clear()
+            hit = g[key] = make()
+        return hit
+
+    def _jt(self, P: PostureMats, F: int):
+        """``J^T`` (F, S, 3), complex: the solves' right-hand side."""
+        return self._grid(P, ("Jt", F), lambda: np.broadcast_to(P.J.T, (F,) + P.J.T.shape).astype(complex))
+
+    def stiffness(self, x, P: PostureMats, omega, tabulated: bool = False):
+        """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,) (``tabulated``: see
+        :func:`unit_loss`)."""
+        k, c, m = self._split(x)
+        K0, M = self._static(x, P)
+        w = np.asarray(omega, float)
+        S = len(k)
+        # the static part (K_g, couplings) once, then the frequency-dependent terms on the (F, S, S)
+        # (-w^2 M kept per posture and data grid while M is the posture's own: no payload)
+        if M is P.M and not tabulated:
+            w2M = self._grid(P, ("w2M", w.tobytes()), lambda: (w * w)[:, None, None] * -M)
+        else:
+            w2M = (w * w)[:, None, None] * -M
         D = np.empty((w.size, S, S), complex)
-        np.multiply((w * w)[:, None, None], -M, out=D.real)
-        D.real[:] += K0
+        np.add(w2M, K0, out=D.real)
         D.imag[:] = 0.0
-        i = np.arange(S)
-        D[:, i, i] += k + c * self._psi(w, tabulated)
+        D.reshape(w.size, S * S)[:, ::S + 1] += k + c * self._psi(w, tabulated)  # the diagonal
         return D, M
+
+    def _solve(self, x, P: PostureMats, w):
+        """``(D, D^{-1} J^T, H)`` at ``x`` on the grid ``w``, kept for the last ``x`` per posture and
+        grid: a fit's Jacobian (:meth:`frf_jacobian`) comes at the ``x`` its residual just had."""
+        xb, wb = np.asarray(x, float).tobytes(), w.tobytes()
+        memo = self.__dict__.setdefault("_solves", {})
+        hit = memo.get((id(P), wb))
+        if hit is not None and hit[0] is P and hit[1] == xb:
+            return hit[2]
+        D, _ = self.stiffness(x, P, w)
+        G = np.linalg.solve(D, self._jt(P, w.size))
+        out = (D, G, P.J[None] @ G)
+        if len(memo) > 64:
+            memo.clear()
+        memo[(id(P), wb)] = (P, xb, out)  # P kept alive with its id
+        return out
 
     @_quiet
     def frf(self, x, q0, freq_hz):
@@ -427,9 +486,7 @@ class FrequencyModel:
         P = self.mats(q0)
         if len(self.structure.springs) == 0:
             return np.zeros((len(freq_hz), 3, 3), complex)
-        D, _ = self.stiffness(x, P, 2 * np.pi * np.asarray(freq_hz))
-        G = np.linalg.solve(D, np.broadcast_to(P.J.T, D.shape[:1] + P.J.T.shape).astype(complex))
-        return P.J[None] @ G
+        return self._solve(x, P, 2 * np.pi * np.asarray(freq_hz, float))[2].copy()
 
     @_quiet
     def frf_jacobian(self, x, q0, freq_hz):
@@ -440,25 +497,22 @@ class FrequencyModel:
         S = len(self.structure.springs)
         x = np.asarray(x, float)
         w = 2 * np.pi * np.asarray(freq_hz, float)
-        D, _ = self.stiffness(x, P, w)
-        Jt = np.broadcast_to(P.J.T, D.shape[:1] + P.J.T.shape).astype(complex)
-        G = np.linalg.solve(D, Jt)  # D^-1 J^T (F, S, 3)
-        Lt = np.linalg.solve(np.swapaxes(D, 1, 2), Jt)  # (J D^-1)^T
-        H = P.J[None] @ G
+        D, G, H = self._solve(x, P, w)  # G = D^-1 J^T (F, S, 3)
+        # (J D^-1)^T: D's own solve when D is symmetric (its matrices are)
+        Lt = G if P.symmetric() else np.linalg.solve(np.swapaxes(D, 1, 2), self._jt(P, w.size))
         k, c, m = self._split(x)
         live = np.abs(x) < 60.0  # _split clips there: no derivative beyond
         dH = np.zeros((x.size, w.size, 3, 3), complex)
-
-        def diag(p, i, v):  # dD = v (F,) at (i, i)
-            dH[p] = -v[:, None, None] * Lt[:, i, :, None] * G[:, i, None, :]
 
         def offdiag(p, a, b, v):  # dD = v at (a, b) and (b, a)
             dH[p] -= v[:, None, None] * (Lt[:, a, :, None] * G[:, b, None, :] + Lt[:, b, :, None] * G[:, a, None, :])
 
         psi = self._psi(w)
-        for i, sp in enumerate(self.structure.springs):
-            diag(i, i, np.full(w.size, k[i], complex))  # d(k + c psi) / d log k
-            diag(S + i, i, c[i] * psi[:, i])  # d(k + c psi) / d log c
+        if S:
+            # dD = v (F,) at (i, i): d(k + c psi) / d log k = k, / d log c = c psi
+            LtT, GT = Lt.transpose(1, 0, 2)[:, :, :, None], G.transpose(1, 0, 2)[:, :, None, :]
+            dH[:S] = (-np.broadcast_to(k[:, None], (S, w.size)).astype(complex))[:, :, None, None] * LtT * GT
+            dH[S:2 * S] = (-(c * psi).T)[:, :, None, None] * LtT * GT
         o = 2 * S
         if self.structure.payload:
             dD = m * (P.dKg[None] - w[:, None, None] ** 2 * P.dM[None])
@@ -471,30 +525,52 @@ class FrequencyModel:
             offdiag(b, a, b, half)
             offdiag(o + q, a, b, np.full(w.size, (1 - r**2) * kab, complex))
         dH[~live] = 0.0
-        return H, dH
+        return H.copy(), dH
 
     @_quiet
     def modes(self, x, q0):
         """(f [Hz], zeta) of the elastic modes, sorted; light-damping approximation: shapes from
         the real stiffness, ``w_r^2`` its Rayleigh quotient at ``w_r`` (iterated for frequency-
-        dependent laws), ``zeta_r = phi^T Im D(w_r) phi / (2 w_r^2 phi^T M phi)``."""
+        dependent laws), ``zeta_r = phi^T Im D(w_r) phi / (2 w_r^2 phi^T M phi)``.
+
+        (The real and imaginary parts of ``D`` are built apart, without the complex (modes, S, S)
+        stack, in the same floating-point operations as :meth:`stiffness`: the fits' picked-peak
+        phases, which call this per data set and trial ``x``, stay bit for bit what they were; an
+        algebraically equal shortcut, ``K_0 + diag(Re d)``, moved case 16's second selected
+        effect.)"""
         P = self.mats(q0)
         S = len(self.structure.springs)
         if S == 0:
             return np.zeros(0), np.zeros(0)
-        frac = any(frequency_dependent(s.law) for s in self.structure.springs)
+        frac = self.__dict__.get("_frac")
+        if frac is None:
+            frac = self._frac = any(frequency_dependent(s.law) for s in self.structure.springs)
         w_ref = 2 * np.pi * 10.0
-        D, M = self.stiffness(x, P, np.array([w_ref]), True)
-        lam, V = _gen_eig(D[0].real + w_ref**2 * M, M)
+        psi_ref = self.__dict__.get("_psi_ref")
+        if psi_ref is None:
+            psi_ref = self._psi_ref = self._psi(np.array([w_ref]), True)
+        k, c, _ = self._split(x)
+        K0, M = self._static(x, P)
+        nM = -M
+        diag = slice(None, None, S + 1)
+
+        def real_part(w, psi):  # Re D(w) (F, S, S)
+            R = (w * w)[:, None, None] * nM
+            R += K0
+            R.reshape(w.size, S * S)[:, diag] += (k + c * psi).real
+            return R
+
+        A = real_part(np.array([w_ref]), psi_ref)[0] + w_ref**2 * M
+        lam, V = _gen_eig(A, M)
         w = np.sqrt(np.maximum(lam, 1e-12))
+        den = np.einsum("ir,ij,jr->r", V, M, V)
         for _ in range(4 if frac else 1):
-            D, M = self.stiffness(x, P, w, True)
-            K = D.real + (w**2)[:, None, None] * M[None]
-            num = np.einsum("ir,rij,jr->r", V, K, V)
-            den = np.einsum("ir,ij,jr->r", V, M, V)
-            w = np.sqrt(np.maximum(num / den, 1e-12))
-        D, M = self.stiffness(x, P, w, True)
-        z = np.einsum("ir,rij,jr->r", V, D.imag, V) / (2 * w**2 * np.einsum("ir,ij,jr->r", V, M, V))
+            K = real_part(w, self._psi(w, True))
+            K += (w**2)[:, None, None] * M
+            w = np.sqrt(np.maximum(np.einsum("ir,rij,jr->r", V, K, V) / den, 1e-12))
+        Dw = np.zeros((w.size, S, S), complex)
+        Dw.reshape(w.size, S * S)[:, diag] += k + c * self._psi(w, True)
+        z = np.einsum("ir,rij,jr->r", V, Dw.imag, V) / (2 * w**2 * den)
         o = np.argsort(w)
         return w[o] / (2 * np.pi), z[o]
 
@@ -626,13 +702,14 @@ def residual(lm: FrequencyModel, x, train, peaks_only: bool = False, peaks: bool
     for d in train:
         a = d.arrays
         if d.kind == "frf":
-            sl = slice(None, None, FIT_STRIDE)
-            H = a["H"][sl]
-            Hm = lm.frf(x, a["q0"], a["freq"][sl])
-            ok, norm = _frf_norm(a)
-            e = (Hm[:, ok] - H[:, ok]) / norm
             if peaks_only:
-                e = e[:0]
+                e = np.zeros(0, complex)  # (no FRF evaluated: the peaks alone enter)
+            else:
+                sl = slice(None, None, FIT_STRIDE)
+                H = a["H"][sl]
+                Hm = lm.frf(x, a["q0"], a["freq"][sl])
+                ok, norm = _frf_norm(a)
+                e = (Hm[:, ok] - H[:, ok]) / norm
             if peaks and "_peaks" not in a:
                 a["_peaks"] = frf_peaks(a["freq"], a["H"])
             pf, pz = a["_peaks"] if peaks else ((), ())
