@@ -17,6 +17,8 @@ import jflex
 from jflex_family import generate as G
 from jflex.gap import _frequency_model as L
 from jflex.gap import _torque as T
+from jflex.gap import _torque_terms as TT
+from jflex.gap._effect_term import SMOOTHING, STRIBECK_VS
 from jflex.gap import diagnose, load_case
 
 SLOW = os.environ.get("JFLEX_SLOW") == "1"
@@ -196,13 +198,13 @@ def test_response_without_every_joint_channel_is_output_error(tmp_path):
 def test_torque_terms_equal_joint_friction_effect(rotor_case):
     c = load_case(rotor_case)
     s = T.torque_set(c.robot, c.datasets[0])
-    fv, fc, fs, vs = 1.3, 0.7, 1.1, T.STRIBECK_VS[2]
-    eff = jflex.effects.JointFriction(["joint2"], viscous=fv, coulomb=fc, stribeck=fs, stribeck_velocity=vs, smoothing=T.EPS_SIGN)
+    fv, fc, fs, vs = 1.3, 0.7, 1.1, STRIBECK_VS[2]
+    eff = jflex.effects.JointFriction(["joint2"], viscous=fv, coulomb=fc, stribeck=fs, stribeck_velocity=vs, smoothing=SMOOTHING)
     model = jflex.Model(c.robot, [eff])
     k = 200
     f = np.array([jflex.effects.JointFriction.generalized_force(eff, model.rigid, model.layout.slots[0], 0.0,
                                                                  jnp.asarray(s.q[i]), jnp.asarray(s.qd[i]), jnp.zeros(0)) for i in range(k)])
-    cols = np.concatenate([T.Term("viscous_friction", 1).columns(s), T.Term("stribeck_friction", 1, vs).columns(s)], axis=2)[:k]
+    cols = np.concatenate([TT.make_term("viscous_friction", 1).columns(s), TT.make_term("stribeck_friction", 1, vs).columns(s)], axis=2)[:k]
     tau = cols @ np.array([fv, fc, fs - fc])
     np.testing.assert_allclose(tau, -f, atol=1e-10)
 
@@ -216,7 +218,7 @@ def test_compensator_term_equals_fourier_compensator(rotor_case):
     z = jnp.zeros(0)
     tau_model = np.array([jflex.model_inverse_dynamics(model, 0.0, jnp.asarray(s.q[i]), jnp.asarray(s.qd[i]),
                                                        jnp.asarray(s.qdd[i]), z) for i in range(k)])
-    cols = T.Term("gravity_compensator", 1).columns(s)[:k]
+    cols = TT.make_term("gravity_compensator", 1).columns(s)[:k]
     np.testing.assert_allclose(s.F0[:k] + cols @ np.array([B[0], 0.0, B[1], 0.0]), tau_model, atol=1e-8)
 
 
@@ -331,18 +333,18 @@ def test_backlash_columns_split_posture_and_engagement_impulse(rotor_case):
     width; its fit searches (half-width, engagement time) and keeps every coefficient non-negative."""
     c = load_case(rotor_case)
     s = T.torque_set(c.robot, c.split("train")[0])
-    cols = T.Term("backlash", 1, (0.01, 0.008)).columns(s)
-    assert cols.shape == s.q.shape + (1 + len(T.BACKLASH_PULSES),)
+    cols = TT.make_term("backlash", 1, (0.01, 0.008)).columns(s)
+    assert cols.shape == s.q.shape + (1 + len(TT.BACKLASH_PULSES),)
     assert np.all(np.isfinite(cols)) and np.abs(cols[:, :, 0]).max() > 0
-    fit = T.fit_play_backlash((), 0.0, 1, [s])
-    b, te = T.backlash_hyper(fit.terms[-1].hyper)
-    assert te in T.BACKLASH_ENGAGE and 0 < b <= max(T.BACKLASH_B) + 0.002 and np.all(fit.theta >= 0)
+    fit = TT.fit_play_backlash((), 0.0, 1, [s])
+    b, te = TT.backlash_hyper(fit.terms[-1].hyper)
+    assert te in TT.BACKLASH_ENGAGE and 0 < b <= max(TT.BACKLASH_B) + 0.002 and np.all(fit.theta >= 0)
     assert "engagement [s]" in T.term_parameters(fit, c.robot.joint_names)[f"backlash@{c.robot.joint_names[1]}"]
     # the candidate's refit keeps the better of the two backlash variants by the information criterion
-    loaded = T.fit_loaded_backlash((), 0.0, 1, [s])
+    loaded = TT.fit_loaded_backlash((), 0.0, 1, [s])
     rows = s.tau.size
     bic = lambda f: rows * np.log(f.cost) + f.terms[-1].n_params * np.log(rows)
-    chosen = T.fit_with((), 0.0, T.Term("backlash", 1), [s])
+    chosen = T.fit_with((), 0.0, TT.make_term("backlash", 1), [s])
     assert chosen.cost == min((fit, loaded), key=bic).cost
 
 
@@ -355,10 +357,10 @@ def test_loaded_backlash_columns_are_the_link_lag_to_first_order(rotor_case):
     c = load_case(rotor_case)
     s = T.torque_set(c.robot, c.split("train")[0])
     j, w = 1, 0.02
-    cols = T.Term("backlash", j, (T.LOADED, w)).columns(s)
+    cols = TT.make_term("backlash", j, (TT.LOADED, w)).columns(s)
     assert cols.shape == s.q.shape + (2,)
-    np.testing.assert_allclose(cols[:, :, 0], T.compliance_column(s, j), rtol=0, atol=0)
-    tj = T.smooth_torque(s)[:, j]
+    np.testing.assert_allclose(cols[:, :, 0], TT.compliance_column(s, j), rtol=0, atol=0)
+    tj = TT.smooth_torque(s)[:, j]
     sg = np.tanh(tj / (w * tj.std()))
     sd = np.gradient(sg, s.t)
     lag = [sg, sd, np.gradient(sd, s.t)]
@@ -371,8 +373,8 @@ def test_loaded_backlash_columns_are_the_link_lag_to_first_order(rotor_case):
     scale = np.abs(cols[:, :, 1]).max()
     assert scale > 0
     np.testing.assert_allclose(cols[:, :, 1], fd, rtol=0, atol=1e-4 * scale)
-    fit = T.fit_loaded_backlash((), 0.0, j, [s])
-    assert fit.terms[-1].hyper[1] in T.BACKLASH_SIGN_WIDTHS and np.all(fit.theta >= 0)
+    fit = TT.fit_loaded_backlash((), 0.0, j, [s])
+    assert fit.terms[-1].hyper[1] in TT.BACKLASH_SIGN_WIDTHS and np.all(fit.theta >= 0)
     names = T.term_parameters(fit, c.robot.joint_names)[f"backlash@{c.robot.joint_names[j]}"]
     assert set(names) == {"compliance 1/k [rad/(N m)]", "b [rad]", "sign width [x std(tau)]"}
 

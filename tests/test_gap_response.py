@@ -17,6 +17,8 @@ import jflex
 from jflex_family import generate as G
 from jflex.gap import _response as R
 from jflex.gap import _torque as T
+from jflex.gap import _torque_terms as TT
+from jflex.gap._effect_term import STRIBECK_VS
 from jflex.gap import diagnose, load_case
 
 TIP_NOISE = 1e-4  # [m]
@@ -64,9 +66,17 @@ def test_simulation_model_torques_equal_the_fitted_terms(tmp_path):
     folder = G.torque_case(tmp_path / "sim", "planar2", [], seed=4, n_train=1, n_val=1)
     c = load_case(folder)
     s = T.torque_set(c.robot, c.datasets[0])
-    terms = (T.Term("viscous_friction", 0), T.Term("stribeck_friction", 1, T.STRIBECK_VS[2]), T.Term("rotor_inertia", 1),
-             T.Term("gravity_compensator", 0), T.Term("payload", None))
-    theta = np.array([0.7, 1.1, 0.4, 0.05, 2.0, -1.0, 0.5, 0.3, 1.2, 0.02, 0.01, -0.03, 0.01, 0.0, 0.02, 0.0, 0.0, 0.03])
+    # a user's effect (an EffectCandidate) enters the simulation as itself, with its fitted values
+    from jflex.gap import EffectCandidate
+    from jflex.gap._effect_term import EffectTerm
+    from jflex.identify import Free
+
+    user = EffectCandidate("my_damper", jflex.effects.JointFriction([c.robot.joint_names[1]], viscous=1.0),
+                           free=(Free("v", lambda m: m.effects[0].viscous),), joint=c.robot.joint_names[1]).bind(c.robot)
+    terms = (TT.make_term("viscous_friction", 0), TT.make_term("stribeck_friction", 1, STRIBECK_VS[2]), TT.make_term("rotor_inertia", 1),
+             TT.make_term("gravity_compensator", 0), TT.make_term("payload", None), TT.make_term("sensor_delay"),
+             EffectTerm(user, 1))
+    theta = np.array([0.7, 1.1, 0.4, 0.05, 2.0, -1.0, 0.5, 0.3, 1.2, 0.02, 0.01, -0.03, 0.01, 0.0, 0.02, 0.0, 0.0, 0.03, 0.6])
     fit = T.TorqueFit(terms, 0.0, theta, 0.0)
     model = R.simulation_model(c.robot, fit)
     k = 40

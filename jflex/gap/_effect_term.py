@@ -25,6 +25,7 @@ from .._dynamics import rnea
 from .._errors import ParameterError
 from .._model import Model, _effect_energy, initial_state
 from ..identify._fit import Free, ParameterSpec
+from ._torque import TorqueTerm
 
 LINEARITY_RTOL = 1e-6  # columns at the start and at twice the start must agree this well
 
@@ -134,8 +135,9 @@ def _columns(model, spec, p, q, qd, qdd):
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class EffectTerm:
-    """An :class:`EffectCandidate` as a torque term of :mod:`._torque` (same interface as ``Term``)."""
+class EffectTerm(TorqueTerm):
+    """An :class:`EffectCandidate` as a torque term (:class:`._torque.TorqueTerm`); fitted, it
+    enters a simulation as its own effect with the fitted values."""
 
     bound: BoundCandidate
     joint: int | None = None
@@ -144,10 +146,6 @@ class EffectTerm:
     @property
     def effect(self) -> str:
         return self.bound.cand.name
-
-    @property
-    def n_params(self) -> int:
-        return self.bound.size
 
     def bounds(self):
         return list(self.bound.lower()), [np.inf] * self.n_params
@@ -161,12 +159,15 @@ class EffectTerm:
             s.cache[key] = self.bound.columns(jnp.asarray(s.q), jnp.asarray(s.qd), jnp.asarray(s.qdd))
         return s.cache[key]
 
-    def label(self, joint_names) -> str:
-        return self.effect if self.joint is None else f"{self.effect}@{joint_names[self.joint]}"
+    def contribute(self, parts, theta) -> None:
+        m = self.bound.spec.apply(self.bound.model, jnp.asarray(theta, float), physical=True)
+        parts.extra += list(m.effects)
 
 
 # --- the built-in torque-side laws, read off jflex.effects ------------------------------------------
 COULOMB_LIMIT = 1e-6  # [rad/s] a Stribeck velocity this small leaves the Coulomb level alone
+STRIBECK_VS = (0.03, 0.06, 0.12, 0.25, 0.5)  # [rad/s] grid of Stribeck velocities a candidate searches
+SMOOTHING = 5e-3  # [rad/s] width of the smooth sign of every Coulomb-like law (dry friction is sharp)
 
 
 # the free leaves' accessors are module-level functions, one object each: they are part of the key of
@@ -178,25 +179,83 @@ def _leaf(attr, i=0):
 _LEAVES: dict = {}
 
 
-def family(robot, name: str, hyper=None, smoothing: float = 5e-3):
-    """The built-in candidate family ``name`` as one effect (or one per joint) on every joint of
-    ``robot`` and its free parameters: the columns of all joints come from one evaluation, and the
-    candidate at joint j takes its own. ``hyper``: the Stribeck velocity [rad/s].
-    **Returns** ``(model, spec, per_joint)`` with ``per_joint(j) -> column indices``."""
+@dataclasses.dataclass(frozen=True)
+class FamilyMeta:
+    """What the diagnosis needs to know of a built-in torque-side candidate, whatever the robot.
+
+    A candidate's coefficients ``theta`` (``param_names``, bounded below by ``lower``) map to the
+    family's free parameters at its joint as ``mix @ theta`` (the Stribeck level is fitted as
+    ``Fs - Fc >= 0``). ``hyper``: ``(leaf, grid, label)`` of a nonlinear parameter held per fit and
+    searched on ``grid`` (the Stribeck velocity), else None. ``subsumed_by``: a nominal family at
+    the same joint that already holds this one. ``signature``: what its residual looks like."""
+
+    param_names: tuple
+    lower: tuple
+    mix: np.ndarray
+    per_joint: bool = True
+    hyper: tuple | None = None
+    subsumed_by: str | None = None
+    signature: str = ""
+
+    def spec_lower(self) -> np.ndarray:
+        """Lower bound of each free parameter at a joint: 0 where made of coefficients bounded by 0."""
+        return np.where(np.any((self.mix != 0) & np.isinf(np.asarray(self.lower))[None, :], axis=1), -np.inf, 0.0)
+
+
+FAMILY_META = {
+    "viscous_friction": FamilyMeta(("Fv [N m s/rad]",), (0.0,), np.eye(1), signature="correlation with joint velocity"),
+    "coulomb_friction": FamilyMeta(("Fc [N m]",), (0.0,), np.eye(1), subsumed_by="stribeck_friction",
+                                   signature="correlation with sign of velocity"),
+    "stribeck_friction": FamilyMeta(("Fc [N m]", "Fs-Fc [N m]"), (0.0, 0.0), np.array([[1.0, 0.0], [1.0, 1.0]]),
+                                    hyper=("stribeck_velocity", STRIBECK_VS, "vs [rad/s]"),
+                                    signature="sign of velocity, larger at low speed"),
+    "rotor_inertia": FamilyMeta(("Ia [kg m^2]",), (0.0,), np.eye(1), signature="correlation with joint acceleration"),
+    "gravity_compensator": FamilyMeta(("B_cos1 [N m]", "B_sin1 [N m]", "B_cos2 [N m]", "B_sin2 [N m]"), (-np.inf,) * 4,
+                                      np.eye(4), signature="posture harmonics of the joint angle"),
+    "payload": FamilyMeta(("m [kg]", "m cx [kg m]", "m cy [kg m]", "m cz [kg m]", "Ixx [kg m^2]", "Ixy [kg m^2]",
+                           "Iyy [kg m^2]", "Ixz [kg m^2]", "Iyz [kg m^2]", "Izz [kg m^2]"), (0.0,) + (-np.inf,) * 9,
+                          np.eye(10), per_joint=False, signature="tool-mass regressor columns"),
+}
+FAMILIES = tuple(FAMILY_META)
+
+
+@dataclasses.dataclass(frozen=True)
+class Family:
+    """A built-in family on one robot: the law on every joint (one evaluation gives every joint's
+    columns), its free parameters ``spec`` and ``per(j)``, the spec entries of joint ``j``."""
+
+    name: str
+    model: Model
+    spec: ParameterSpec
+    per: object
+    meta: FamilyMeta
+
+    def with_hyper(self, value) -> Model:
+        """The family's model with its hyper-parameter ``value`` (scalar or (n,)) on every joint."""
+        if self.meta.hyper is None or value is None:
+            return self.model
+        n = len(self.model.robot.joint_names)
+        v = jnp.broadcast_to(jnp.asarray(value, float), (n,))
+        return eqx.tree_at(lambda m: getattr(m.effects[0], self.meta.hyper[0]), self.model, v)
+
+
+def family(robot, name: str) -> Family:
+    """The built-in candidate family ``name`` (one of :data:`FAMILIES`) as effects on ``robot``."""
     from .. import effects as E
 
     names = tuple(robot.joint_names)
     n = len(names)
     if name == "viscous_friction":
-        effs = [E.JointFriction(names, viscous=1.0, smoothing=smoothing)]
+        effs = [E.JointFriction(names, viscous=1.0, smoothing=SMOOTHING)]
         free = (Free("viscous", _leaf("viscous")),)
         per = lambda j: [j]
     elif name == "coulomb_friction":
-        effs = [E.JointFriction(names, coulomb=1.0, stribeck_velocity=COULOMB_LIMIT, smoothing=smoothing)]
+        # stribeck 0: the level is coulomb (1 - exp(-(qd/COULOMB_LIMIT)^2)), linear in it, no bump
+        effs = [E.JointFriction(names, coulomb=1.0, stribeck=0.0, stribeck_velocity=COULOMB_LIMIT, smoothing=SMOOTHING)]
         free = (Free("coulomb", _leaf("coulomb")),)
         per = lambda j: [j]
     elif name == "stribeck_friction":
-        effs = [E.JointFriction(names, coulomb=1.0, stribeck=1.0, stribeck_velocity=float(hyper), smoothing=smoothing)]
+        effs = [E.JointFriction(names, coulomb=1.0, stribeck=1.0, stribeck_velocity=STRIBECK_VS[2], smoothing=SMOOTHING)]
         free = (Free("coulomb", _leaf("coulomb")), Free("stribeck", _leaf("stribeck")))
         per = lambda j: [j, n + j]
     elif name == "rotor_inertia":
@@ -215,26 +274,61 @@ def family(robot, name: str, hyper=None, smoothing: float = 5e-3):
     else:
         raise KeyError(name)
     model = Model(robot, effs)
-    return model, ParameterSpec(free).bind(model), per
+    return Family(name, model, ParameterSpec(free).bind(model), per, FAMILY_META[name])
 
 
-_FAMILIES: dict = {}  # (id(robot), name) -> (robot, model, spec, per): one compiled program per family
+_FAMILIES: dict = {}  # (id(robot), name) -> (robot, Family): one compiled program per family
 
 
-def family_columns(robot, name, hyper, q, qd, qdd) -> tuple:
-    """(N, n, size) columns of a family (:func:`family`) along a motion, and its ``per_joint``.
-    The family's model and free-parameter spec are built once per robot (their functions are part
-    of the compiled program's key); a Stribeck velocity is a leaf set into it."""
+def family_of(robot, name) -> Family:
+    """:func:`family`, built once per robot (its functions are part of the compiled program's key)."""
     key = (id(robot), name)
     hit = _FAMILIES.get(key)
     if hit is None or hit[0] is not robot:
         if len(_FAMILIES) > 64:
             _FAMILIES.clear()
-        hit = _FAMILIES[key] = (robot, *family(robot, name, 0.1 if name == "stribeck_friction" else None))
-    _, model, spec, per = hit
-    if name == "stribeck_friction":
-        model = eqx.tree_at(lambda m: m.effects[0].stribeck_velocity, model,
-                            jnp.full(robot.nq, float(hyper)))
-    p = spec.physical(spec.pack(model))
-    return np.asarray(_columns(model, spec, p, q, qd, qdd)), per
+        hit = _FAMILIES[key] = (robot, family(robot, name))
+    return hit[1]
 
+
+def family_columns(robot, name, hyper, q, qd, qdd) -> np.ndarray:
+    """(N, n, size) columns of a family along a motion, in its spec's order; the hyper-parameter
+    (if the family has one) set to ``hyper``."""
+    fam = family_of(robot, name)
+    model = fam.with_hyper(hyper)
+    p = fam.spec.physical(fam.spec.pack(model))
+    return np.asarray(_columns(model, fam.spec, p, q, qd, qdd))
+
+
+class FamilyCoefficients:
+    """Fitted coefficients gathered per family (spec vectors, zero where nothing was fitted) and
+    the per-joint hyper-parameters, for a model of fixed structure (:meth:`effects`)."""
+
+    def __init__(self, robot):
+        self.robot = robot
+        self.coeff = {name: np.zeros(family_of(robot, name).spec.size) for name in FAMILIES}
+        self.hypers = {}
+        self.extra = []  # effects of other (user) candidates, with their fitted values
+
+    def add(self, name, joint, theta, hyper=None):
+        fam = family_of(self.robot, name)
+        self.coeff[name][fam.per(0 if joint is None else joint)] += fam.meta.mix @ np.asarray(theta, float)
+        if fam.meta.hyper is not None and hyper is not None:
+            h = self.hypers.setdefault(name, np.full(len(self.robot.joint_names), float(fam.meta.hyper[1][2])))
+            h[joint] = float(hyper)
+
+    def effects(self) -> list:
+        """Every family of :data:`FAMILIES` as effects with these values (one structure whatever was
+        fitted: one compiled solve), then the extra effects. Coefficients bounded below by zero are
+        clipped there (the bounded fit keeps them >= 0; a last-digit negative would be refused by the laws)."""
+        out = []
+        n = len(self.robot.joint_names)
+        for name in FAMILIES:
+            fam = family_of(self.robot, name)
+            lo = np.full(fam.spec.size, -np.inf)
+            for j in range(n if fam.meta.per_joint else 1):
+                lo[fam.per(j)] = fam.meta.spec_lower()
+            p = np.maximum(self.coeff[name], lo)
+            model = fam.with_hyper(self.hypers.get(name))
+            out += list(fam.spec.apply(model, jnp.asarray(p), physical=True).effects)
+        return out + list(self.extra)

@@ -22,9 +22,9 @@ from ._inertia import inertia_prior
 from . import _frequency_model as L
 from . import _response as R
 from . import _torque as T
+from ._torque_terms import KINDS, make_term
 
-TORQUE_EFFECTS = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
-                  "backlash", "payload", "sensor_delay", "joint_flexibility")
+TORQUE_EFFECTS = tuple(KINDS)
 LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "payload")
 # the damping laws of jflex.effects (and any a user defined) that name themselves candidates: each is
 # tried at every flexible joint, its small-motion law read off the law itself (:mod:`._frequency_model`)
@@ -124,15 +124,15 @@ class Problem:
     def nominal_state(self) -> State:
         terms, delay = [], 0.0
         for e in self.nominal_effects:
-            if e["effect"] in TORQUE_EFFECTS and e["effect"] not in ("payload", "sensor_delay"):
-                for j in e["joints"]:
-                    h = {"stribeck_friction": T.STRIBECK_VS[2], "backlash": 0.01}.get(e["effect"])
-                    terms.append(T.Term(e["effect"], self.names.index(j), h))
-            elif e["effect"] == "payload":
-                terms.append(T.Term("payload", None))
-            elif e["effect"] == "sensor_delay":
-                delay = float(e.get("value", [0.0])[0])
-                terms.append(T.Term("sensor_delay", None, delay))
+            kind = KINDS.get(e["effect"])
+            if kind is None:
+                continue
+            if not kind.per_joint:
+                terms.append(kind(None, float(e["value"][0]) if "value" in e else None))
+                delay = terms[-1].delay if terms[-1].delay is not None else delay  # a nominal sensor delay's value
+                continue
+            for j in e["joints"]:
+                terms.append(kind(self.names.index(j)))
         tfit = None
         if self.ttrain:
             held = T.fit_terms(tuple(terms), delay, self.ttrain)
@@ -229,15 +229,13 @@ class Problem:
         out = []
         nom = {e for e, _ in self.nominal}
         if self.ttrain:
-            for eff in TORQUE_EFFECTS:
-                if eff in ("payload", "sensor_delay"):
+            for eff, kind in KINDS.items():
+                if not kind.per_joint:
                     if eff not in nom:
                         out.append(Candidate(eff, None))
                     continue
                 for j in range(self.n):
-                    if (eff, j) in self.nominal:
-                        continue
-                    if eff == "coulomb_friction" and ("stribeck_friction", j) in self.nominal:
+                    if (eff, j) in self.nominal or (kind.subsumed_by, j) in self.nominal:
                         continue
                     out.append(Candidate(eff, j))
         if self.ttrain:
@@ -268,13 +266,8 @@ class Problem:
         tfit, lm, x = state.tfit, state.lm, state.x
         if cand in self.user and self.ttrain:
             tfit = T.fit_with(tfit.terms, tfit.delay, EffectTerm(self.user[cand], cand.joint), self.ttrain, self.inertia)
-        elif cand.effect in TORQUE_EFFECTS and self.ttrain:
-            if cand.effect == "sensor_delay":
-                base = tuple(t for t in tfit.terms if t.effect != "sensor_delay")
-                tfit = T.fit_with(base, 0.0, T.Term("sensor_delay", None), self.ttrain, self.inertia)
-            else:
-                tfit = T.fit_with(tfit.terms, tfit.delay, T.Term(cand.effect, cand.joint, T.STRIBECK_VS[2]), self.ttrain,
-                                  self.inertia)
+        elif cand.effect in KINDS and self.ttrain:
+            tfit = T.fit_with(tfit.terms, tfit.delay, make_term(cand.effect, cand.joint), self.ttrain, self.inertia)
         if (cand.effect in LINEAR_EFFECTS or cand.effect in law_candidates()) and self.ftrain and lm is not None:
             lm, x = self._add_linear(lm, x, cand)
         return State(tfit, lm, x, state.added + (cand,))

@@ -25,12 +25,11 @@ import numpy as np
 from .._model import Model
 from .._simulate import simulate
 from .._model import model_inverse_dynamics, initial_state
-from ..effects import FlexibleJoints, FourierGravityCompensator, JointFriction, Payload, RotorInertia
+from ..effects import FlexibleJoints
 from .._inputs import Sampled
-from . import _torque as T
+from ._effect_term import FamilyCoefficients
 
 TIP_CHANNELS = {"tip_x": 0, "tip_y": 1, "tip_z": 2}  # [m] origin of the case's tool_frame, base axes
-NOT_SIMULATED = ("sensor_delay", "backlash")  # act on the measurement, not on the motion
 RTOL, ATOL = 1e-7, 1e-9  # the records' noise is ~1e-4 of their spread: the solver error stays far below
 MAX_STEPS = 200_000
 FAILED_ERROR = 10.0  # normalised error (1000 %) of samples a failed or diverged solve left non-finite
@@ -38,54 +37,34 @@ FAILED_ERROR = 10.0  # normalised error (1000 %) of samples a failed or diverged
 
 def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     """The rigid robot plus the fitted torque terms (none when ``tfit`` is None) plus the joint
-    springs ``{joint: (k, c)}`` [N m/rad, N m s/rad].
+    springs ``{joint: (k, c)}`` [N m/rad, N m s/rad] (or ``(k, c, I_m)``: with the motor's inertia [kg m^2]).
 
+    Each term puts its own effect into the model (:meth:`._torque.TorqueTerm.contribute`): the
+    laws of :mod:`jflex.effects` with the fitted coefficients, zero where a term is absent (one
+    structure for every model: one compiled solve), and a user's effect as itself; terms that act
+    on what a sensor reads (a delay, play seen by a motor encoder) add nothing.
     ``rotor`` (n,) [kg m^2] is rotor inertia added to the fitted one (the nominal values of a case
     without torque training data). A spring's motor side carries the joint's rotor inertia and is
     driven by the applied torque; a flexible joint without rotor inertia is left rigid (a massless
     motor passes the applied torque through its spring unchanged)."""
-    n = robot.nq
-    p = {k: np.zeros(n) for k in ("viscous", "coulomb", "stribeck", "rotor")}
-    vel = np.ones(n)
-    comp = np.zeros((n, 4))
-    pay = np.zeros(10)
+    parts = FamilyCoefficients(robot)
     k = 0
     for term in tfit.terms if tfit is not None else ():
-        th = np.asarray(tfit.theta[k:k + term.n_params], float)
+        term.contribute(parts, np.asarray(tfit.theta[k:k + term.n_params], float))
         k += term.n_params
-        j, e = term.joint, term.effect
-        if e == "viscous_friction":
-            p["viscous"][j] += th[0]
-        elif e == "coulomb_friction":
-            p["coulomb"][j] += th[0]
-        elif e == "stribeck_friction":
-            p["coulomb"][j] += th[0]
-            p["stribeck"][j] += th[1]
-            vel[j] = term.hyper
-        elif e == "rotor_inertia":
-            p["rotor"][j] += th[0]
-        elif e == "gravity_compensator":
-            comp[j] += th
-        elif e == "payload":
-            pay += th  # the regressor columns of the last link: its inertia parameters
+    rot = parts.coeff["rotor_inertia"]  # (n,): the family's one parameter per joint
     if rotor is not None:
-        p["rotor"] += np.asarray(rotor, float)
-    flex = sorted(j for j in (springs or {}) if p["rotor"][j] > 0)
-    motor = np.array([p["rotor"][j] for j in flex])
-    for j in flex:
-        p["rotor"][j] = 0.0  # on the motor side of the spring
+        rot += np.asarray(rotor, float)
+    for j, v in (springs or {}).items():
+        if len(v) > 2:  # a spring fitted with its motor's inertia (:mod:`._simulated`)
+            rot[j] = v[2]
+    flex = sorted(j for j in (springs or {}) if rot[j] > 0)
+    motor = np.array([rot[j] for j in flex])
+    rot[flex] = 0.0  # on the motor side of the spring
     inert = np.asarray(robot.inertia, float).copy()
     if tfit is not None and tfit.delta is not None:
         inert += tfit.delta.reshape(inert.shape)  # the nominal identification's inertial parameters
-    names = tuple(robot.joint_names)
-    for key in p:  # the bounded fit keeps them >= 0; a last-digit negative would be refused by the laws
-        p[key] = np.maximum(p[key], 0.0)
-    # the laws of jflex.effects with the fitted coefficients, zero where a term is absent (one
-    # structure for every model: one compiled solve); the payload is the last link's parameters
-    effects = [JointFriction(names, viscous=p["viscous"], coulomb=p["coulomb"], stribeck=p["coulomb"] + p["stribeck"],
-                             stribeck_velocity=vel, smoothing=T.EPS_SIGN),
-               RotorInertia(names, p["rotor"]), Payload(pay)]
-    effects += [FourierGravityCompensator(comp[j, [0, 2]], joint=j, sine=comp[j, [1, 3]]) for j in range(n)]
+    effects = parts.effects()
     if flex:
         kk = np.array([springs[j][0] for j in flex], float)
         cc = np.array([springs[j][1] for j in flex], float)

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._problem import TORQUE_EFFECTS, Candidate, Problem, State
+from ._problem import Candidate, Problem, State
 from . import _torque as T
+from ._torque_terms import BACKLASH_PULSES, KINDS, make_term
+
 
 def n_params(c: Candidate, user=None, torque: bool = True) -> int:
     """Parameters ``c`` adds; a payload is its 10 inertial parameters on torque data, one point
@@ -18,7 +20,7 @@ def n_params(c: Candidate, user=None, torque: bool = True) -> int:
         return 1
     return {"stribeck_friction": 3, "gravity_compensator": 4, "payload": 10, "orthogonal_compliance": 4,
             "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2,
-            "backlash": 1 + len(T.BACKLASH_PULSES)}.get(c.effect, 1)
+            "backlash": 1 + len(BACKLASH_PULSES)}.get(c.effect, 1)
 
 
 def signatures(problem: Problem, state: State, cands) -> dict:
@@ -30,16 +32,12 @@ def signatures(problem: Problem, state: State, cands) -> dict:
         return out
     res = [(T.predict(state.tfit, s) - s.tau) / s.scale for s in problem.ttrain]
     for c in cands:
-        if c.effect not in TORQUE_EFFECTS:
+        if c.effect not in KINDS:
             continue
+        term = make_term(c.effect, c.joint)
         best = 0.0
         for s, r in zip(problem.ttrain, res):
-            if c.effect == "sensor_delay":
-                cols = (np.gradient(T.predict(state.tfit, s), s.t, axis=0) / s.scale)[:, :, None]
-            else:
-                hs = {"stribeck_friction": [T.STRIBECK_VS[1]], "backlash": [0.01, (T.LOADED, 0.01)]}.get(c.effect, [None])
-                cols = np.concatenate([T.term_columns(T.Term(c.effect, c.joint, h), s) for h in hs], axis=2)
-                cols = cols / s.scale[None, :, None]
+            cols = term.signature_columns(s, state.tfit) / s.scale[None, :, None]
             for k in range(cols.shape[2]):
                 v = cols[:, :, k].ravel()
                 nv = np.linalg.norm(v)
@@ -49,12 +47,9 @@ def signatures(problem: Problem, state: State, cands) -> dict:
     return out
 
 
+# what each candidate's residual looks like: the torque-side kinds say it themselves
 SIGNATURE_NAMES = {
-    "viscous_friction": "correlation with joint velocity", "coulomb_friction": "correlation with sign of velocity",
-    "stribeck_friction": "sign of velocity, larger at low speed", "rotor_inertia": "correlation with joint acceleration",
-    "gravity_compensator": "posture harmonics of the joint angle", "backlash": "dead zone at reversals of motion or of the transmitted torque",
-    "payload": "tool-mass regressor columns", "sensor_delay": "phase lag: correlation with d tau/dt",
-    "joint_flexibility": "extra FRF peak / unmatched mode; in torques, the link lagging under load (tau_j / k)", "orthogonal_compliance": "extra FRF peak / unmatched mode",
-    "link_flexibility": "extra FRF peak / unmatched mode", "hysteretic_damping": "damping ratio flat in frequency",
-    "fractional_damping": "damping ratio growing as w^(alpha-1)",
+    **{name: kind.signature for name, kind in KINDS.items()},
+    "orthogonal_compliance": "extra FRF peak / unmatched mode", "link_flexibility": "extra FRF peak / unmatched mode",
+    "hysteretic_damping": "damping ratio flat in frequency", "fractional_damping": "damping ratio growing as w^(alpha-1)",
 }

@@ -1,4 +1,4 @@
-"""Torque-side terms of the gap diagnosis: each effect as columns of an equation-error model.
+"""Torque data sets of the gap diagnosis and the equation-error fit of torque terms on them.
 
 Along a measured motion the inverse dynamics of the nominal model plus effects is
 
@@ -8,8 +8,8 @@ linear in every effect's coefficients ``theta_e`` once its few nonlinear hyper-p
 (Stribeck velocity, sensor delay ``d`` of the shift operator ``S_d``) are fixed. With the nominal
 identification (:mod:`._inertia`) ``tau_rigid = Y (pi_cad + delta)`` and ``delta`` is fitted with
 the coefficients. So each refit is a bounded linear least-squares solve (warm start: the hyper-parameters of effects already in the
-model are kept; only a new effect's are searched on a grid). Each term's columns equal minus the
-generalised force of the matching :mod:`jflex.effects` effect (checked in the tests).
+model are kept; only a new effect's are searched on a grid). The kinds of term are in
+:mod:`._torque_terms`; the laws among them are :mod:`jflex.effects` effects (:mod:`._effect_term`).
 """
 
 from __future__ import annotations
@@ -23,17 +23,9 @@ import scipy.optimize as so
 
 from .._dynamics import rnea
 from .._errors import DataError
-from ._effect_term import family_columns
 from ..identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
                                 motion_band, zero_phase_lowpass)
 
-EPS_SIGN = 0.005  # [rad/s] width of the smooth sign used by every Coulomb-like term (dry friction is sharp)
-# torque-side laws whose columns come from jflex.effects (the others act between the measurement and
-# the rigid model: a sensor's delay, play between motor encoder and link, a link lagging its motor)
-LAW_FAMILIES = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "gravity_compensator",
-                "payload")
-STRIBECK_VS = (0.03, 0.06, 0.12, 0.25, 0.5)  # [rad/s] grid of Stribeck velocities
-DELAYS = tuple(np.round(np.arange(0.001, 0.0605, 0.001), 4))  # [s] grid of sensor delays
 
 
 @dataclasses.dataclass
@@ -77,27 +69,6 @@ class TorqueSet:
 @jax.jit
 def _id_batch(robot, q, qd, qdd):
     return jax.vmap(lambda a, b, c: rnea(robot, a, b, c))(q, qd, qdd)
-
-
-def first_order_zero_phase(x, t, tau):
-    """First-order low-pass run forwards and backwards (no lag), time constant ``tau`` [s]."""
-    import scipy.signal as ss
-
-    a = np.exp(-np.mean(np.diff(t)) / tau)
-    return ss.filtfilt([1 - a], [1, -a], np.asarray(x, float), padtype="constant", padlen=0) if len(x) > 6 else np.asarray(x)
-
-
-def play(x, b):
-    """Play (backlash) operator of half-width ``b``: the driven side stays put until the driving
-    side has crossed the gap."""
-    y = np.empty_like(x)
-    y[0] = x[0]
-    for i in range(1, len(x)):
-        y[i] = min(max(y[i - 1], x[i] - b), x[i] + b)
-    return y
-
-
-BACKLASH_B = (0.003, 0.005, 0.0075, 0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03)  # [rad] grid of backlash half-widths
 
 
 @jax.jit
@@ -193,122 +164,6 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
                      processing=processing)
 
 
-BACKLASH_ENGAGE = (0.004, 0.008, 0.012)  # [s] grid of engagement smoothing (contact compliance) time constants
-BACKLASH_ENGAGE_FIRST = 0.008  # [s] the engagement time of the half-width grid search (and of a bare b)
-BACKLASH_PULSES = (0.004, 0.008, 0.016, 0.032)  # [s] widths of the engagement-impulse basis
-# a loaded gear with play: the link sits against the tooth face the transmitted torque pushes it
-# to and crosses the play when that torque changes sign; the sign is smoothed over this fraction
-# of the joint torque's standard deviation (the crossing's duration, unknown: a grid)
-BACKLASH_SIGN_WIDTHS = (0.005, 0.01, 0.02, 0.05)
-LOADED = "loaded"  # hyper-parameter tag of that variant: (LOADED, sign width)
-
-
-def is_loaded(h) -> bool:
-    """Whether a backlash hyper-parameter is the loaded-gear variant (see :func:`loaded_backlash_torque`)."""
-    return isinstance(h, tuple) and len(h) == 2 and h[0] == LOADED
-
-
-def backlash_hyper(h):
-    """``(b, engagement time constant)`` from a term's hyper-parameter (a bare ``b`` takes 8 ms)."""
-    return (float(h), BACKLASH_ENGAGE_FIRST) if np.ndim(h) == 0 else (float(h[0]), float(h[1]))
-
-
-def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
-    """Rigid torque change columns (N, n, 1 + len(BACKLASH_PULSES)) when the link of joint ``j``
-    follows the measured (motor-side) angle through a play of half-width ``b``, ``h = (b, tau_e)``.
-
-    Column 0: the link's posture and velocity (play output, engagement smoothed by a zero-phase
-    first-order filter of time constant ``tau_e``) with the measured acceleration. Columns 1..:
-    the engagement impulse, ``M(q_link)[:, j]`` times the link's extra acceleration, its velocity
-    smoothed over each width of :data:`BACKLASH_PULSES`: the contact's stiffness and damping (how
-    hard the teeth meet) set the impulse's shape, unknown, so it is a non-negative mixture."""
-    b, tau_e = backlash_hyper(h)
-    key = ("backlash", j, b, tau_e)
-    if key not in s.cache:
-        ql, qdl = s.q.copy(), s.qd.copy()
-        ql[:, j] = first_order_zero_phase(play(s.q[:, j], b), s.t, tau_e)
-        qdl[:, j] = np.gradient(ql[:, j], s.t)
-        Fa = np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(s.qdd)))
-        cols = [Fa - s.F0]
-        for w in BACKLASH_PULSES:
-            qdd = s.qdd.copy()
-            qdd[:, j] = np.gradient(first_order_zero_phase(qdl[:, j], s.t, w), s.t)
-            cols.append(np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qdd))) - Fa)
-        s.cache[key] = np.stack(cols, axis=2)
-    return s.cache[key]
-
-
-def loaded_backlash_torque(s: TorqueSet, j: int, width: float) -> np.ndarray:
-    """Columns (N, n, 2) of a loaded transmission with play at joint ``j``: the link lags the
-    motor-side angle by ``tau_j / k + b sgn(tau_j)`` (the spring's deflection plus the half-play on
-    the side the transmitted torque presses), ``theta = [1/k, b]``. To first order both are
-    RNEA's directional derivative along ``e_j`` times the deflection and its rates, as in
-    :func:`compliance_column`; ``sgn`` is ``tanh(tau_j / (width std(tau_j)))`` of the low-passed
-    measured torque. The kinematic play of :func:`backlash_torque` suits a link that no load
-    presses against a tooth face; a gravity- or inertia-loaded one crosses the play when its torque
-    reverses, and its gear's compliance comes with it."""
-    key = ("loaded_backlash", j, width)
-    if key not in s.cache:
-        tj = smooth_torque(s)[:, j]
-        sg = np.tanh(tj / (width * max(float(np.std(tj)), 1e-300)))
-        s.cache[key] = np.stack([compliance_column(s, j), link_lag_column(s, j, sg)], axis=2)
-    return s.cache[key]
-
-
-def link_lag_column(s: TorqueSet, j: int, lag) -> np.ndarray:
-    """(N, n) change of the rigid torques when the link of joint ``j`` lags the measured angle by
-    ``lag`` (N,) per unit of it, to first order: minus RNEA's directional derivative along
-    ``e_j (lag, d lag/dt, d2 lag/dt2)``."""
-    lagd = np.gradient(lag, s.t)
-    d = [np.zeros_like(s.q) for _ in range(3)]
-    for k, v in enumerate((lag, lagd, np.gradient(lagd, s.t))):
-        d[k][:, j] = v
-    return -np.asarray(_jvp_batch(s.robot, *[jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]))
-
-
-@jax.jit
-def _jvp_batch(robot, q, qd, qdd, dq, dqd, dqdd):
-    f = lambda a, b, c: rnea(robot, a, b, c)
-    return jax.vmap(lambda *x: jax.jvp(f, x[:3], x[3:])[1])(q, qd, qdd, dq, dqd, dqdd)
-
-
-def smooth_torque(s: TorqueSet) -> np.ndarray:
-    """The measured torque, low-passed (the set's own filter, else one at CUTOFF_FACTOR x the
-    motion band): what a column built from the torque itself may differentiate."""
-    if s.cutoff is not None:
-        return s.tau
-    if "smooth_tau" not in s.cache:
-        h = float(np.mean(np.diff(s.t)))
-        fc = min(CUTOFF_FACTOR * motion_band(s.q, h), 0.4 / h)
-        s.cache["smooth_tau"] = zero_phase_lowpass(s.tau, h, fc)
-    return s.cache["smooth_tau"]
-
-
-def compliance_column(s: TorqueSet, j: int) -> np.ndarray:
-    """(N, n) torque change per unit compliance ``1/k`` of a flexible joint ``j`` whose motor-side
-    angle is what the encoder measured: the link lags it by the deflection ``tau_j / k`` (the
-    measured joint torque, as the spring passes it on), so to first order in the compliance the
-    rigid torques change by minus RNEA's directional derivative along ``e_j (tau_j, dtau_j/dt,
-    d2tau_j/dt2)`` (the quasi-static deflection of :class:`jflex.effects.FlexibleJoints`; its own
-    damping and the motor's inertia are left out: the latter is ``rotor_inertia``)."""
-    key = ("compliance", j)
-    if key not in s.cache:
-        s.cache[key] = link_lag_column(s, j, smooth_torque(s)[:, j])
-    return s.cache[key]
-
-
-def held_sign(v, tol):
-    """sign(v) held through stretches where |v| < tol (the side of the last motion)."""
-    s = np.sign(v) * (np.abs(v) >= tol)
-    out = np.empty_like(s)
-    last = np.sign(v[0]) if v[0] != 0 else 1.0
-    for i, x in enumerate(s):  # noqa: a short loop on (N,) once per data set
-        if x != 0:
-            last = x
-        out[i] = last
-    return out
-
-
 def shift(X, t, d):
     """``S_d X``: the signal delayed by ``d`` [s] (linear interpolation; the first samples hold)."""
     if d == 0:
@@ -320,67 +175,46 @@ def shift(X, t, d):
     return out.reshape(X.shape)
 
 
-@dataclasses.dataclass(frozen=True)
-class Term:
-    """One effect on the torque side: ``effect`` at ``joint`` (index or None)."""
+class TorqueTerm:
+    """One effect on the torque side, placed at ``joint`` (index, or None) with its nonlinear
+    hyper-parameter ``hyper`` held: ``columns`` (N, n, k) such that ``tau += columns @ theta``.
 
-    effect: str
-    joint: int | None
-    hyper: float | tuple | None = None  # Stribeck velocity [rad/s], delay [s] or backlash (b [rad], engagement [s])
+    The kinds (:mod:`._torque_terms`, and :class:`._effect_term.EffectTerm` for an effect a user
+    gives) are frozen dataclasses with the fields ``joint`` and ``hyper`` and define ``effect`` (the
+    name), ``columns``, ``param_names``; the rest has defaults here."""
+
+    per_joint = True  # placed at a joint (else one for the whole robot)
+    signature = ""  # what its residual looks like, for the report
+    delay = None  # [s] the shift of the measurement this term stands for (a sensor's delay)
 
     @property
     def n_params(self) -> int:
-        if self.effect == "backlash" and is_loaded(self.hyper):
-            return 2
-        return {"stribeck_friction": 2, "gravity_compensator": 4, "payload": 10, "sensor_delay": 0, "joint_flexibility": 1,
-                "backlash": 1 + len(BACKLASH_PULSES)}.get(self.effect, 1)
+        return len(self.param_names())
 
     def bounds(self):
-        lo = {"gravity_compensator": [-np.inf] * 4, "payload": [0.0] + [-np.inf] * 9}.get(
-            self.effect, [0.0] * self.n_params)
-        return lo, [np.inf] * self.n_params
-
-    def param_names(self):
-        if self.effect == "backlash" and is_loaded(self.hyper):
-            return ["compliance 1/k [rad/(N m)]", "b [rad]"]
-        return {
-            "viscous_friction": ["Fv [N m s/rad]"], "coulomb_friction": ["Fc [N m]"],
-            "stribeck_friction": ["Fc [N m]", "Fs-Fc [N m]"], "rotor_inertia": ["Ia [kg m^2]"],
-            "joint_flexibility": ["compliance 1/k [rad/(N m)]"],
-            "gravity_compensator": ["B_cos1 [N m]", "B_sin1 [N m]", "B_cos2 [N m]", "B_sin2 [N m]"],
-            "payload": ["m [kg]", "m cx [kg m]", "m cy [kg m]", "m cz [kg m]", "Ixx [kg m^2]", "Ixy [kg m^2]",
-                        "Iyy [kg m^2]", "Ixz [kg m^2]", "Iyz [kg m^2]", "Izz [kg m^2]"],
-            "backlash": ["engagement (1 = full play)"] + [f"impulse {w * 1e3:g} ms" for w in BACKLASH_PULSES],
-            "sensor_delay": [],
-        }[self.effect]
-
-    def columns(self, s: TorqueSet) -> np.ndarray:
-        """(N, n, k) columns: tau += columns @ theta."""
-        N, n = s.q.shape
-        j = self.joint
-        out = np.zeros((N, n, self.n_params))
-        e = self.effect
-        if e in LAW_FAMILIES:
-            # the law of jflex.effects itself: its inverse-dynamics Jacobian in the coefficients
-            key = ("family", e, self.hyper)
-            if key not in s.cache:
-                args = [jnp.asarray(a) for a in (s.q, s.qd, s.qdd)]
-                s.cache[key] = family_columns(s.robot, e, self.hyper, *args)
-            cols, per = s.cache[key]
-            out[:] = cols[:, :, per(0 if j is None else j)]
-            if e == "stribeck_friction":
-                out[:, :, 0] += out[:, :, 1]  # [Fc, Fs] -> [Fc, Fs - Fc]
-        elif e == "joint_flexibility":
-            out[:, :, 0] = compliance_column(s, j)
-        elif e == "backlash" and is_loaded(self.hyper):
-            out[:, :, :] = loaded_backlash_torque(s, j, self.hyper[1])
-        elif e == "backlash":
-            # motor-side encoder; the link follows through the play (hyper = (half-width, engagement))
-            out[:, :, :] = backlash_torque(s, j, self.hyper)
-        return out
+        return [0.0] * self.n_params, [np.inf] * self.n_params
 
     def label(self, joint_names) -> str:
         return self.effect if self.joint is None else f"{self.effect}@{joint_names[self.joint]}"
+
+    def parameters(self, theta) -> dict:
+        """``{name: value}`` of the fitted coefficients and the held hyper-parameters."""
+        return {nm: float(v) for nm, v in zip(self.param_names(), theta)}
+
+    def search(self, base_terms, base_delay, sets, inertia=None) -> "TorqueFit":
+        """The refit with this term added to ``base_terms``; a kind with a hyper-parameter searches it."""
+        return fit_terms(tuple(base_terms) + (self,), base_delay, sets, inertia)
+
+    def probes(self) -> tuple:
+        """Terms whose columns a residual is correlated with before any refit (:mod:`._signatures`)."""
+        return (self,)
+
+    def signature_columns(self, s, fit) -> np.ndarray:
+        return np.concatenate([term_columns(t, s) for t in self.probes()], axis=2)
+
+    def contribute(self, parts, theta) -> None:
+        """Add the fitted effect to a simulation model's parts (:class:`._effect_term.FamilyCoefficients`);
+        the default: the effect acts on what a sensor reads, not on the motion, and is not simulated."""
 
 
 @dataclasses.dataclass
@@ -397,7 +231,7 @@ class TorqueFit:
     cov_delta: np.ndarray | None = None  # (10 n, 10 n) covariance of delta (bounds inactive)
 
 
-def term_columns(term: Term, s: TorqueSet) -> np.ndarray:
+def term_columns(term: "TorqueTerm", s: TorqueSet) -> np.ndarray:
     """(N, n, k) columns of ``term`` on ``s``, through the set's parallel filter (cached)."""
     key = ("cols", term)
     if key not in s.cache:
@@ -506,64 +340,17 @@ def with_inertia_sigma(fit: TorqueFit, sets) -> float:
     return float(np.sqrt(fit.cost / max(rows, 1)))
 
 
-def fit_with(base_terms, base_delay, new: Term | None, sets, inertia=None) -> TorqueFit:
-    """Refit with ``new`` added; its hyper-parameter (if any) searched on a grid by training cost."""
+def fit_with(base_terms, base_delay, new, sets, inertia=None) -> TorqueFit:
+    """Refit with the term ``new`` added (its kind searches its hyper-parameter, if any)."""
     if new is None:
         return fit_terms(base_terms, base_delay, sets, inertia)
-    if new.effect == "sensor_delay":
-        fits = [fit_terms(base_terms, d, sets, inertia) for d in DELAYS]
-        best = min(fits, key=lambda f: f.cost)
-        return dataclasses.replace(best, terms=best.terms + (Term("sensor_delay", None, best.delay),))
-    if new.effect == "backlash":
-        # the kinematic play and the loaded gear free different numbers of coefficients: the better
-        # of the two by the information criterion
-        rows = sum(s.tau.size for s in sets)
-        bic = lambda f: rows * np.log(max(f.cost, 1e-300)) + f.terms[-1].n_params * np.log(rows)
-        return min((fit_play_backlash(base_terms, base_delay, new.joint, sets, inertia),
-                    fit_loaded_backlash(base_terms, base_delay, new.joint, sets, inertia)), key=bic)
-    grid = {"stribeck_friction": STRIBECK_VS}.get(new.effect)
-    if grid is not None:
-        fits = [fit_terms(tuple(base_terms) + (Term(new.effect, new.joint, v),), base_delay, sets, inertia) for v in grid]
-        return min(fits, key=lambda f: f.cost)
-    return fit_terms(tuple(base_terms) + (new,), base_delay, sets, inertia)
-
-
-def fit_play_backlash(base_terms, base_delay, j, sets, inertia=None) -> TorqueFit:
-    """Kinematic play at joint ``j`` (:func:`backlash_torque`): the half-width on a grid (engagement
-    BACKLASH_ENGAGE_FIRST), the engagement time on its grid, then the half-width refined around the best."""
-    fit = lambda h: fit_terms(tuple(base_terms) + (Term("backlash", j, h),), base_delay, sets, inertia)
-    best = min((fit((b, BACKLASH_ENGAGE_FIRST)) for b in BACKLASH_B), key=lambda f: f.cost)
-    b = best.terms[-1].hyper[0]
-    best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != BACKLASH_ENGAGE_FIRST], key=lambda f: f.cost)
-    te = best.terms[-1].hyper[1]
-    for step in (0.00125, 0.000625):
-        best = min([best] + [fit((b + d, te)) for d in (-step, step) if b + d > 0], key=lambda f: f.cost)
-        b = best.terms[-1].hyper[0]
-    return best
-
-
-def fit_loaded_backlash(base_terms, base_delay, j, sets, inertia=None) -> TorqueFit:
-    """A loaded gear with play at joint ``j`` (:func:`loaded_backlash_torque`), its sign width on a grid."""
-    fits = (fit_terms(tuple(base_terms) + (Term("backlash", j, (LOADED, w)),), base_delay, sets, inertia)
-            for w in BACKLASH_SIGN_WIDTHS)
-    return min(fits, key=lambda f: f.cost)
+    return new.search(base_terms, base_delay, sets, inertia)
 
 
 def term_parameters(fit: TorqueFit, joint_names) -> dict:
     """``{label: {param: value}}`` of a fit."""
     out, k = {}, 0
     for t in fit.terms:
-        names = t.param_names()
-        d = {nm: float(fit.theta[k + i]) for i, nm in enumerate(names)}
-        if t.effect == "stribeck_friction":
-            d["vs [rad/s]"] = float(t.hyper)
-        if t.effect == "sensor_delay":
-            d["delay [s]"] = float(t.hyper)
-        if t.effect == "backlash" and is_loaded(t.hyper):
-            d["sign width [x std(tau)]"] = float(t.hyper[1])
-        elif t.effect == "backlash":
-            b, te = backlash_hyper(t.hyper)
-            d["b [rad]"], d["engagement [s]"] = b, te
-        out[t.label(joint_names)] = d
-        k += len(names)
+        out[t.label(joint_names)] = t.parameters(fit.theta[k:k + t.n_params])
+        k += t.n_params
     return out

@@ -1,0 +1,374 @@
+"""The kinds of torque-side term the gap diagnosis tries (:class:`._torque.TorqueTerm`), one class
+each, and the table that names them (:data:`KINDS`).
+
+The laws (friction, rotor inertia, gravity compensator, payload) are :mod:`jflex.effects` effects:
+a :class:`LawTerm`'s columns are the effect's own generalised force, differentiated in its
+coefficients (:mod:`._effect_term`), and a fitted one enters a simulation as that effect. The
+others act between the measurement and the rigid model and are first-order corrections along the
+measured motion: a joint's compliance (the link lagging its motor by ``tau_j / k``, the
+quasi-static deflection of :class:`jflex.effects.FlexibleJoints`), play in the gear, a sensor's
+delay. A kind added here (or an :class:`jflex.gap.EffectCandidate`) needs no edit elsewhere in
+the diagnosis.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._dynamics import rnea
+from ..identify._signal import motion_band, zero_phase_lowpass
+from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
+from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, predict
+
+DELAYS = tuple(np.round(np.arange(0.001, 0.0605, 0.001), 4))  # [s] grid of sensor delays
+
+
+def first_order_zero_phase(x, t, tau):
+    """First-order low-pass run forwards and backwards (no lag), time constant ``tau`` [s]."""
+    import scipy.signal as ss
+
+    a = np.exp(-np.mean(np.diff(t)) / tau)
+    return ss.filtfilt([1 - a], [1, -a], np.asarray(x, float), padtype="constant", padlen=0) if len(x) > 6 else np.asarray(x)
+
+
+def play(x, b):
+    """Play (backlash) operator of half-width ``b``: the driven side stays put until the driving
+    side has crossed the gap."""
+    y = np.empty_like(x)
+    y[0] = x[0]
+    for i in range(1, len(x)):
+        y[i] = min(max(y[i - 1], x[i] - b), x[i] + b)
+    return y
+
+
+BACKLASH_B = (0.003, 0.005, 0.0075, 0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03)  # [rad] grid of backlash half-widths
+
+
+# --- laws of jflex.effects ---------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class LawTerm(TorqueTerm):
+    """A built-in family of :mod:`jflex.effects` (:data:`._effect_term.FAMILIES`) at one joint
+    (``None``: the payload); ``hyper`` its held nonlinear parameter (the Stribeck velocity)."""
+
+    effect: str
+    joint: int | None = None
+    hyper: float | None = None
+
+    @property
+    def meta(self):
+        return FAMILY_META[self.effect]
+
+    @property
+    def per_joint(self) -> bool:
+        return self.meta.per_joint
+
+    @property
+    def signature(self) -> str:
+        return self.meta.signature
+
+    def param_names(self):
+        return list(self.meta.param_names)
+
+    def bounds(self):
+        return list(self.meta.lower), [np.inf] * self.n_params
+
+    def columns(self, s: TorqueSet) -> np.ndarray:
+        key = ("family", self.effect, self.hyper)
+        if key not in s.cache:
+            s.cache[key] = family_columns(s.robot, self.effect, self.hyper, *(jnp.asarray(a) for a in (s.q, s.qd, s.qdd)))
+        per = family_of(s.robot, self.effect).per(0 if self.joint is None else self.joint)
+        return s.cache[key][:, :, per] @ self.meta.mix
+
+    def parameters(self, theta) -> dict:
+        out = super().parameters(theta)
+        if self.meta.hyper is not None:
+            out[self.meta.hyper[2]] = float(self.hyper)
+        return out
+
+    def search(self, base_terms, base_delay, sets, inertia=None):
+        if self.meta.hyper is None:
+            return super().search(base_terms, base_delay, sets, inertia)
+        fits = [fit_terms(tuple(base_terms) + (dataclasses.replace(self, hyper=v),), base_delay, sets, inertia)
+                for v in self.meta.hyper[1]]
+        return min(fits, key=lambda f: f.cost)
+
+    def probes(self):
+        return (self if self.meta.hyper is None else dataclasses.replace(self, hyper=self.meta.hyper[1][1]),)
+
+    def contribute(self, parts, theta) -> None:
+        parts.add(self.effect, self.joint, theta, self.hyper)
+
+    @classmethod
+    def kind(cls, name):
+        """The constructor of family ``name``'s terms, ``(joint, hyper=None) -> LawTerm``; its
+        nominal hyper-parameter is the middle of the grid."""
+        meta = FAMILY_META[name]
+
+        def make(joint=None, hyper=None):
+            if hyper is None and meta.hyper is not None:
+                hyper = meta.hyper[1][len(meta.hyper[1]) // 2]
+            return cls(name, joint, hyper)
+
+        make.per_joint = meta.per_joint
+        make.subsumed_by = meta.subsumed_by
+        make.signature = meta.signature
+        return make
+
+
+# --- a joint's compliance, seen in torque data -----------------------------------------------------
+@jax.jit
+def _jvp_batch(robot, q, qd, qdd, dq, dqd, dqdd):
+    f = lambda a, b, c: rnea(robot, a, b, c)
+    return jax.vmap(lambda *x: jax.jvp(f, x[:3], x[3:])[1])(q, qd, qdd, dq, dqd, dqdd)
+
+
+def link_lag_column(s: TorqueSet, j: int, lag) -> np.ndarray:
+    """(N, n) change of the rigid torques when the link of joint ``j`` lags the measured angle by
+    ``lag`` (N,) per unit of it, to first order: minus RNEA's directional derivative along
+    ``e_j (lag, d lag/dt, d2 lag/dt2)``."""
+    lagd = np.gradient(lag, s.t)
+    d = [np.zeros_like(s.q) for _ in range(3)]
+    for k, v in enumerate((lag, lagd, np.gradient(lagd, s.t))):
+        d[k][:, j] = v
+    return -np.asarray(_jvp_batch(s.robot, *[jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]))
+
+
+def smooth_torque(s: TorqueSet) -> np.ndarray:
+    """The measured torque, low-passed (the set's own filter, else one at CUTOFF_FACTOR x the
+    motion band): what a column built from the torque itself may differentiate."""
+    if s.cutoff is not None:
+        return s.tau
+    if "smooth_tau" not in s.cache:
+        h = float(np.mean(np.diff(s.t)))
+        fc = min(CUTOFF_FACTOR * motion_band(s.q, h), 0.4 / h)
+        s.cache["smooth_tau"] = zero_phase_lowpass(s.tau, h, fc)
+    return s.cache["smooth_tau"]
+
+
+def compliance_column(s: TorqueSet, j: int) -> np.ndarray:
+    """(N, n) torque change per unit compliance ``1/k`` of a flexible joint ``j`` whose motor-side
+    angle is what the encoder measured: the link lags it by the deflection ``tau_j / k`` (the
+    measured joint torque, as the spring passes it on), so to first order in the compliance the
+    rigid torques change by minus RNEA's directional derivative along ``e_j (tau_j, dtau_j/dt,
+    d2tau_j/dt2)`` (the quasi-static deflection of :class:`jflex.effects.FlexibleJoints`; its own
+    damping and the motor's inertia are left out: the latter is ``rotor_inertia``)."""
+    key = ("compliance", j)
+    if key not in s.cache:
+        s.cache[key] = link_lag_column(s, j, smooth_torque(s)[:, j])
+    return s.cache[key]
+
+
+@dataclasses.dataclass(frozen=True)
+class CompliantJoint(TorqueTerm):
+    """A flexible joint in torque data: the link lagging its motor by ``tau_j / k`` (:func:`compliance_column`)."""
+
+    joint: int
+    hyper: None = None
+    effect: ClassVar[str] = "joint_flexibility"
+    signature: ClassVar[str] = "extra FRF peak / unmatched mode; in torques, the link lagging under load (tau_j / k)"
+
+    def param_names(self):
+        return ["compliance 1/k [rad/(N m)]"]
+
+    def columns(self, s):
+        return compliance_column(s, self.joint)[:, :, None]
+
+
+# --- play in the gear ------------------------------------------------------------------------------
+BACKLASH_ENGAGE = (0.004, 0.008, 0.012)  # [s] grid of engagement smoothing (contact compliance) time constants
+BACKLASH_ENGAGE_FIRST = 0.008  # [s] the engagement time of the half-width grid search (and of a bare b)
+BACKLASH_PULSES = (0.004, 0.008, 0.016, 0.032)  # [s] widths of the engagement-impulse basis
+# a loaded gear with play: the link sits against the tooth face the transmitted torque pushes it
+# to and crosses the play when that torque changes sign; the sign is smoothed over this fraction
+# of the joint torque's standard deviation (the crossing's duration, unknown: a grid)
+BACKLASH_SIGN_WIDTHS = (0.005, 0.01, 0.02, 0.05)
+LOADED = "loaded"  # hyper-parameter tag of that variant: (LOADED, sign width)
+
+
+def is_loaded(h) -> bool:
+    """Whether a backlash hyper-parameter is the loaded-gear variant (see :func:`loaded_backlash_torque`)."""
+    return isinstance(h, tuple) and len(h) == 2 and h[0] == LOADED
+
+
+def backlash_hyper(h):
+    """``(b, engagement time constant)`` from a term's hyper-parameter (a bare ``b`` takes 8 ms)."""
+    return (float(h), BACKLASH_ENGAGE_FIRST) if np.ndim(h) == 0 else (float(h[0]), float(h[1]))
+
+
+def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
+    """Rigid torque change columns (N, n, 1 + len(BACKLASH_PULSES)) when the link of joint ``j``
+    follows the measured (motor-side) angle through a play of half-width ``b``, ``h = (b, tau_e)``.
+
+    Column 0: the link's posture and velocity (play output, engagement smoothed by a zero-phase
+    first-order filter of time constant ``tau_e``) with the measured acceleration. Columns 1..:
+    the engagement impulse, ``M(q_link)[:, j]`` times the link's extra acceleration, its velocity
+    smoothed over each width of :data:`BACKLASH_PULSES`: the contact's stiffness and damping (how
+    hard the teeth meet) set the impulse's shape, unknown, so it is a non-negative mixture."""
+    b, tau_e = backlash_hyper(h)
+    key = ("backlash", j, b, tau_e)
+    if key not in s.cache:
+        ql, qdl = s.q.copy(), s.qd.copy()
+        ql[:, j] = first_order_zero_phase(play(s.q[:, j], b), s.t, tau_e)
+        qdl[:, j] = np.gradient(ql[:, j], s.t)
+        Fa = np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(s.qdd)))
+        cols = [Fa - s.F0]
+        for w in BACKLASH_PULSES:
+            qdd = s.qdd.copy()
+            qdd[:, j] = np.gradient(first_order_zero_phase(qdl[:, j], s.t, w), s.t)
+            cols.append(np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qdd))) - Fa)
+        s.cache[key] = np.stack(cols, axis=2)
+    return s.cache[key]
+
+
+def loaded_backlash_torque(s: TorqueSet, j: int, width: float) -> np.ndarray:
+    """Columns (N, n, 2) of a loaded transmission with play at joint ``j``: the link lags the
+    motor-side angle by ``tau_j / k + b sgn(tau_j)`` (the spring's deflection plus the half-play on
+    the side the transmitted torque presses), ``theta = [1/k, b]``. To first order both are
+    RNEA's directional derivative along ``e_j`` times the deflection and its rates, as in
+    :func:`compliance_column`; ``sgn`` is ``tanh(tau_j / (width std(tau_j)))`` of the low-passed
+    measured torque. The kinematic play of :func:`backlash_torque` suits a link that no load
+    presses against a tooth face; a gravity- or inertia-loaded one crosses the play when its torque
+    reverses, and its gear's compliance comes with it."""
+    key = ("loaded_backlash", j, width)
+    if key not in s.cache:
+        tj = smooth_torque(s)[:, j]
+        sg = np.tanh(tj / (width * max(float(np.std(tj)), 1e-300)))
+        s.cache[key] = np.stack([compliance_column(s, j), link_lag_column(s, j, sg)], axis=2)
+    return s.cache[key]
+
+
+
+@dataclasses.dataclass(frozen=True)
+class Play(TorqueTerm):
+    """Backlash as kinematic play at ``joint`` (:func:`backlash_torque`), ``hyper = (b, engagement)``.
+    Its candidate search also tries the loaded gear (:class:`LoadedPlay`) and keeps the better of
+    the two by the information criterion (they free different numbers of coefficients)."""
+
+    joint: int
+    hyper: tuple | float = 0.01
+    effect: ClassVar[str] = "backlash"
+    signature: ClassVar[str] = "dead zone at reversals of motion or of the transmitted torque"
+
+    def param_names(self):
+        return ["engagement (1 = full play)"] + [f"impulse {w * 1e3:g} ms" for w in BACKLASH_PULSES]
+
+    def columns(self, s):
+        return backlash_torque(s, self.joint, self.hyper)
+
+    def parameters(self, theta):
+        out = super().parameters(theta)
+        out["b [rad]"], out["engagement [s]"] = backlash_hyper(self.hyper)
+        return out
+
+    def search(self, base_terms, base_delay, sets, inertia=None):
+        rows = sum(s.tau.size for s in sets)
+        bic = lambda f: rows * np.log(max(f.cost, 1e-300)) + f.terms[-1].n_params * np.log(rows)
+        return min((fit_play_backlash(base_terms, base_delay, self.joint, sets, inertia),
+                    fit_loaded_backlash(base_terms, base_delay, self.joint, sets, inertia)), key=bic)
+
+    def probes(self):
+        return (Play(self.joint, 0.01), LoadedPlay(self.joint, (LOADED, 0.01)))
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadedPlay(Play):
+    """Backlash in a loaded gear at ``joint`` (:func:`loaded_backlash_torque`), ``hyper = (LOADED, sign width)``."""
+
+    def param_names(self):
+        return ["compliance 1/k [rad/(N m)]", "b [rad]"]
+
+    def columns(self, s):
+        return loaded_backlash_torque(s, self.joint, self.hyper[1])
+
+    def parameters(self, theta):
+        out = TorqueTerm.parameters(self, theta)
+        out["sign width [x std(tau)]"] = float(self.hyper[1])
+        return out
+
+
+def backlash(joint, hyper=None) -> Play:
+    """A backlash term: :class:`LoadedPlay` for a loaded-gear hyper-parameter, else :class:`Play`
+    (a nominal one: half-width 0.01 rad)."""
+    return LoadedPlay(joint, hyper) if is_loaded(hyper) else Play(joint, 0.01 if hyper is None else hyper)
+
+
+def fit_play_backlash(base_terms, base_delay, j, sets, inertia=None):
+    """Kinematic play at joint ``j`` (:func:`backlash_torque`): the half-width on a grid (engagement
+    BACKLASH_ENGAGE_FIRST), the engagement time on its grid, then the half-width refined around the best."""
+    fit = lambda h: fit_terms(tuple(base_terms) + (Play(j, h),), base_delay, sets, inertia)
+    best = min((fit((b, BACKLASH_ENGAGE_FIRST)) for b in BACKLASH_B), key=lambda f: f.cost)
+    b = best.terms[-1].hyper[0]
+    best = min([best] + [fit((b, te)) for te in BACKLASH_ENGAGE if te != BACKLASH_ENGAGE_FIRST], key=lambda f: f.cost)
+    te = best.terms[-1].hyper[1]
+    for step in (0.00125, 0.000625):
+        best = min([best] + [fit((b + d, te)) for d in (-step, step) if b + d > 0], key=lambda f: f.cost)
+        b = best.terms[-1].hyper[0]
+    return best
+
+
+def fit_loaded_backlash(base_terms, base_delay, j, sets, inertia=None):
+    """A loaded gear with play at joint ``j`` (:func:`loaded_backlash_torque`), its sign width on a grid."""
+    fits = (fit_terms(tuple(base_terms) + (LoadedPlay(j, (LOADED, w)),), base_delay, sets, inertia)
+            for w in BACKLASH_SIGN_WIDTHS)
+    return min(fits, key=lambda f: f.cost)
+
+
+# --- a sensor's delay -------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class SensorDelay(TorqueTerm):
+    """The torque measurement lagging the motion by ``hyper`` [s]: no coefficient, the fit's
+    ``delay`` (the shift operator of :func:`._torque.fit_terms`), searched on :data:`DELAYS`."""
+
+    joint: None = None
+    hyper: float | None = None
+    effect: ClassVar[str] = "sensor_delay"
+    per_joint: ClassVar[bool] = False
+    signature: ClassVar[str] = "phase lag: correlation with d tau/dt"
+
+    def param_names(self):
+        return []
+
+    def columns(self, s):
+        return np.zeros(s.q.shape + (0,))
+
+    @property
+    def delay(self):
+        return self.hyper
+
+    def parameters(self, theta):
+        return {"delay [s]": float(self.hyper)}
+
+    def search(self, base_terms, base_delay, sets, inertia=None):
+        base = tuple(t for t in base_terms if not isinstance(t, SensorDelay))  # one delay, refitted from scratch
+        best = min((fit_terms(base, d, sets, inertia) for d in DELAYS), key=lambda f: f.cost)
+        return dataclasses.replace(best, terms=best.terms + (SensorDelay(None, best.delay),))
+
+    def signature_columns(self, s, fit):
+        return (np.gradient(predict(fit, s), s.t, axis=0))[:, :, None]
+
+
+# --- the table ---------------------------------------------------------------------------------------
+def _kinds() -> dict:
+    k = {name: LawTerm.kind(name) for name in FAMILIES[:5]}
+    k["backlash"] = backlash
+    k["payload"] = LawTerm.kind("payload")
+    k["sensor_delay"] = lambda joint=None, hyper=None: SensorDelay(None, 0.0 if hyper is None else float(hyper))
+    k["joint_flexibility"] = lambda joint, hyper=None: CompliantJoint(joint)
+    for name, cls in (("backlash", Play), ("sensor_delay", SensorDelay), ("joint_flexibility", CompliantJoint)):
+        k[name].per_joint, k[name].subsumed_by, k[name].signature = cls.per_joint, None, cls.signature
+    return k
+
+
+# the torque-side candidates by name, in the order the diagnosis tries them: ``KINDS[name](joint,
+# hyper=None)`` makes a term; each constructor carries ``per_joint``, ``subsumed_by`` and ``signature``
+KINDS = _kinds()
+
+
+def make_term(name: str, joint=None, hyper=None) -> TorqueTerm:
+    """The torque term of candidate ``name`` at ``joint`` (hyper-parameter ``hyper``, else its default)."""
+    return KINDS[name](joint, hyper)
