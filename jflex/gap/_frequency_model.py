@@ -504,9 +504,6 @@ class FrequencyModel:
         live = np.abs(x) < 60.0  # _split clips there: no derivative beyond
         dH = np.zeros((x.size, w.size, 3, 3), complex)
 
-        def offdiag(p, a, b, v):  # dD = v at (a, b) and (b, a)
-            dH[p] -= v[:, None, None] * (Lt[:, a, :, None] * G[:, b, None, :] + Lt[:, b, :, None] * G[:, a, None, :])
-
         psi = self._psi(w)
         if S:
             # dD = v (F,) at (i, i): d(k + c psi) / d log k = k, / d log c = c psi
@@ -519,11 +516,13 @@ class FrequencyModel:
             dH[o] = -np.einsum("fsi,fst,ftj->fij", Lt, dD, G)
             o += 1
         for q, ((a, b), r) in enumerate(zip(self.pairs, self.coupling(x))):
+            # dD = v (F,) at (a, b) and (b, a): dH = -v J D^-1 (e_a e_b^T + e_b e_a^T) D^-1 J^T
+            X = Lt[:, a, :, None] * G[:, b, None, :] + Lt[:, b, :, None] * G[:, a, None, :]
             kab = np.sqrt(k[a] * k[b])
-            half = np.full(w.size, 0.5 * r * kab, complex)
-            offdiag(a, a, b, half)  # d(r sqrt(k_a k_b)) / d log k_a
-            offdiag(b, a, b, half)
-            offdiag(o + q, a, b, np.full(w.size, (1 - r**2) * kab, complex))
+            half = np.full(w.size, 0.5 * r * kab, complex)[:, None, None] * X
+            dH[a] -= half  # d(r sqrt(k_a k_b)) / d log k_a
+            dH[b] -= half
+            dH[o + q] -= np.full(w.size, (1 - r**2) * kab, complex)[:, None, None] * X
         dH[~live] = 0.0
         return H.copy(), dH
 
