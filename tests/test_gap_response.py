@@ -118,14 +118,15 @@ def test_malformed_tip_response_errors(tip_folder, edit, words):
         assert w in str(e.value), str(e.value)
 
 
-def test_tip_response_needs_tool_frame_and_train_split_is_not_fitted(tip_folder):
+def test_tip_response_needs_tool_frame_and_train_split_needs_a_validation_record(tip_folder):
     p = tip_folder / "case.yaml"
     cfg = yaml.safe_load(p.read_text())
     cfg.pop("tool_frame")
     p.write_text(yaml.safe_dump(cfg))
     with pytest.raises(jflex.ConfigError, match=r"case\.yaml: field 'tool_frame': .*datasets\[1\].*tip1\.npz"):
         load_case(tip_folder)
-    # a tip record in the train split is validated but left out of the fit (scored on validation only)
+    # a tip record in the train split fits the simulated candidates when a tip validation record
+    # judges them (tests/test_gap_simulated.py); it is listed as not used only without one
     from jflex.gap._problem import Problem
 
     cfg["tool_frame"] = "tool"
@@ -133,7 +134,7 @@ def test_tip_response_needs_tool_frame_and_train_split_is_not_fitted(tip_folder)
     cfg["datasets"].append(dict(kind="response", file="tip1.npz", split="validation", name="tip1v"))
     p.write_text(yaml.safe_dump(cfg))
     pb = Problem(load_case(tip_folder))
-    assert [d.name for d in pb.responses] == ["tip1"] and [s.name for s in pb.rval] == ["tip1v"]
+    assert pb.responses == [] and [s.name for s in pb.rtrain] == ["tip1"] and [s.name for s in pb.rval] == ["tip1v"]
 
 
 def test_joint_flexibility_seen_at_the_tip_is_found(tmp_path):

@@ -147,7 +147,23 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     def on_select(step):
         say(f"selected {step.cand.label(pb.names)}: gap {gap_summary(step.ev, floor)[0]:.2f} %")
 
-    sel = forward_select(nom, ev0, floor, pool, refit, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain)), max_effects=max_effects if keep else 0,
+    simulated = {}
+
+    def refine(step):
+        # a spring screened by simulation is identified (output error through jflex.simulate) once it
+        # is selected, before the next round builds on it: one costly fit per selected spring
+        new = [j for j, _ in step.state.springs if j not in dict(sel_springs)]
+        if not new:
+            return step.state, step.ev
+        say(f"identifying the spring at {pb.names[new[0]]} through the simulation")
+        st = pb.polish(step.state, new)
+        ev = pb.evaluate(st)
+        simulated[pb.names[new[0]]] = dict(gap_screened=gap_summary(step.ev, floor)[0], gap_identified=gap_summary(ev, floor)[0])
+        sel_springs.extend(st.springs)
+        return st, ev
+
+    sel_springs = list(nom.springs)
+    sel = forward_select(nom, ev0, floor, pool, refit, refine=refine, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain)), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select, significant=significant,
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of
@@ -195,6 +211,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         parameters=parameters(pb, state), nominal_parameters=parameters(pb, nom),
         unmatched_modes=[w for w in wh if w.get("unmatched")],
         responses_output_error=[s.name for s in pb.rval],
+        responses_fitted=[s.name for s in pb.rtrain], simulated_refit=simulated,
         responses_not_modelled=[d.name for d in pb.responses],
         failed_solves=failed,
         seconds=time.perf_counter() - t0,

@@ -18,6 +18,7 @@ from ._case import Case
 from ._effect_term import EffectCandidate, EffectTerm
 from ._frequency_inertia import refit_linear_inertia, shifted
 from ._noise import fits_to_noise
+from ._simulated import BASINS, polish_spring, scan_spring
 from ._inertia import inertia_prior
 from . import _frequency_model as L
 from . import _response as R
@@ -26,6 +27,7 @@ from ._torque_terms import KINDS, make_term
 
 TORQUE_EFFECTS = tuple(KINDS)
 LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "payload")
+SIMULATED_EFFECTS = ("joint_flexibility",)  # refitted through jflex.simulate on output-error training records
 # the damping laws of jflex.effects (and any a user defined) that name themselves candidates: each is
 # tried at every flexible joint, its small-motion law read off the law itself (:mod:`._frequency_model`)
 def law_candidates() -> dict:
@@ -60,6 +62,7 @@ class State:
     lm: object | None
     x: np.ndarray | None
     added: tuple = ()
+    springs: tuple = ()  # ((joint, (k, c, I_m)), ...) fitted through the simulation (:mod:`._simulated`)
 
 
 def _is_torque(d) -> bool:
@@ -98,7 +101,10 @@ class Problem:
         # the others are simulated under their applied torques and compared as output error, on
         # validation only: a refit through the simulation would cost one nonlinear fit per candidate
         self.rval = [R.response_set(self.robot, d, case.tool_frame) for d in case.split("validation") if _is_output_error(d)]
-        self.responses = [d for d in case.split("train") if _is_output_error(d)]
+        # training records of that kind fit the candidates only a simulation shows (:mod:`._simulated`)
+        self.rtrain = [R.response_set(self.robot, d, case.tool_frame) for d in case.split("train") if _is_output_error(d)]
+        # without held-out records of that kind to judge them, they are not used
+        self.responses = [] if self.rval else [d for d in case.split("train") if _is_output_error(d)]
         self.nominal = {(e["effect"], self.names.index(j)) for e in case.nominal_effects for j in e["joints"]}
         # candidate effects given as jflex.effects effects (the user's own laws among them)
         self.user = {}
@@ -254,6 +260,9 @@ class Problem:
                             out.append(Candidate(name, j))
             if "payload" not in nom and not self.ttrain:
                 out.append(Candidate("payload", None))
+        if self.rtrain and self.rval:
+            flex = {s.where for s in self._nominal_springs()}
+            out += [Candidate(e, j) for e in SIMULATED_EFFECTS for j in range(self.n) if j not in flex]
         return list(dict.fromkeys(out))
 
     def _nominal_springs(self):
@@ -270,7 +279,13 @@ class Problem:
             tfit = T.fit_with(tfit.terms, tfit.delay, make_term(cand.effect, cand.joint), self.ttrain, self.inertia)
         if (cand.effect in LINEAR_EFFECTS or cand.effect in law_candidates()) and self.ftrain and lm is not None:
             lm, x = self._add_linear(lm, x, cand)
-        return State(tfit, lm, x, state.added + (cand,))
+        springs = state.springs
+        if cand.effect in SIMULATED_EFFECTS and self.rtrain and not (self.ftrain and lm is not None):
+            # no FRF/modal data place the spring: the output-error training records do
+            held = State(tfit, lm, x, state.added, springs)
+            k = scan_spring(self.robot, tfit, self.sim_springs(held), self._rotor(), cand.joint, self.rtrain)
+            springs = tuple((j, v) for j, v in springs if j != cand.joint) + ((cand.joint, k),)
+        return State(tfit, lm, x, state.added + (cand,), springs)
 
     def _add_linear(self, lm, x, cand):
         st = lm.structure
@@ -474,12 +489,28 @@ class Problem:
                 for j, kj, cj in zip(e["joints"], e["stiffness"], c):
                     if kj > 0:
                         out[self.names.index(j)] = (float(kj), float(cj))
+        out.update(dict(state.springs))
         return out
+
+    def polish(self, state: State, joints) -> State:
+        """``state`` with the simulation-screened springs at ``joints`` identified
+        (:func:`._simulated.polish_spring`), the others held."""
+        springs = dict(state.springs)
+        for j in joints:
+            others = dict(self.sim_springs(dataclasses.replace(state, springs=())))
+            others.update({i: v for i, v in springs.items() if i != j})
+            starts = scan_spring(self.robot, state.tfit, others, self._rotor(), j, self.rtrain, basins=BASINS)
+            springs[j] = polish_spring(self.robot, state.tfit, others, self._rotor(), j, starts, self.rtrain)
+        return dataclasses.replace(state, springs=tuple(springs.items()))
+
+    def _rotor(self):
+        """Rotor inertias [kg m^2] the case states (None when torque training data fit them)."""
+        return None if self.ttrain else self.rotor_nominal
 
     def simulation_model(self, state: State):
         """The model a tip (output-error) set is simulated with (:func:`._response.simulation_model`);
         rotor inertia from the nominal ``value`` when no torque training set fits it."""
-        return R.simulation_model(self.robot, state.tfit, self.sim_springs(state), None if self.ttrain else self.rotor_nominal)
+        return R.simulation_model(self.robot, state.tfit, self.sim_springs(state), self._rotor())
 
     # --- evaluation ----------------------------------------------------------------------------
     def evaluate(self, state: State, sets="validation", frequency_only: bool = False) -> dict:
@@ -557,4 +588,7 @@ def parameters(pb: Problem, st: State) -> dict:
             nm = {"orth": f"{pb.names[sp[b].where]}_orth", "link": f"{pb.robot.link_names[sp[b].where]}_bend"}[sp[b].kind]
             lin[nm + "_coupling"] = {"r = k_ab / sqrt(k_a k_b)": float(r)}
         out["linear"] = lin
+    if st.springs:
+        out["simulated"] = {pb.names[j]: {"stiffness [N m/rad]": k, "damping [N m s/rad]": c, "rotor inertia [kg m^2]": im}
+                            for j, (k, c, im) in st.springs}
     return out

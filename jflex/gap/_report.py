@@ -255,9 +255,13 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
         if len(r["failed_solves"]) > 20:
             L.append(f"| ... {len(r['failed_solves']) - 20} more in diagnosis.json | | | |")
     if r["responses_not_modelled"]:
-        L.append(f"Response data sets {r['responses_not_modelled']} were validated but not used: they lack a channel for "
-                 "some model joint and lie in the train split, where output error is not fitted (it is scored on "
-                 "validation sets only).")
+        L.append(f"Response data sets {r['responses_not_modelled']} were not used: they lack a channel for some model "
+                 "joint and lie in the train split, and no validation set of that kind judges what they would fit.")
+    if r.get("responses_fitted") and r.get("simulated_refit"):
+        L.append(f"Response training sets {r['responses_fitted']} fitted the joint springs through the simulation (a flexible "
+                 "joint is screened at every joint by simulation, a selected one identified by output error): validation gap "
+                 + ", ".join(f"{j} {v['gap_screened']:.2f} % screened, {v['gap_identified']:.2f} % identified"
+                             for j, v in r["simulated_refit"].items()) + ".")
     L += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
     L.append(f"\n_Diagnosis took {r['seconds']:.1f} s._")
     return "\n".join(L) + "\n"

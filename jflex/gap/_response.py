@@ -130,21 +130,31 @@ def _solve(model, ts, x0, inputs, outputs):
     return r.outputs
 
 
-def predict(model: Model, s: ResponseSet) -> np.ndarray:
-    """Simulated channels (N, k); NaN where the solve failed."""
-    out = _solve(model, jnp.asarray(s.t), jnp.asarray(rest_coords(model, s.q0)), Sampled(s.t, s.tau), s.outputs)
+def channels(out: dict, s: ResponseSet) -> np.ndarray:
+    """The set's channels (..., N, k) from simulated outputs ``{name: (..., N, ...)}``."""
     cols = []
     for i, comp in s.picks:
         v = np.asarray(out[s.outputs[i]])
-        cols.append(v if comp is None else v[:, comp])
-    return np.stack(cols, axis=1)
+        cols.append(v if comp is None else v[..., comp])
+    return np.stack(cols, axis=-1)
+
+
+def predict(model: Model, s: ResponseSet) -> np.ndarray:
+    """Simulated channels (N, k); NaN where the solve failed."""
+    return channels(_solve(model, jnp.asarray(s.t), jnp.asarray(rest_coords(model, s.q0)), Sampled(s.t, s.tau), s.outputs), s)
+
+
+def error(pred, s: ResponseSet) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised output error (..., N, k) of predicted channels, and per record (...) the number
+    of samples a failed solve left non-finite or a diverged one put beyond ``FAILED_ERROR`` (1000 %
+    of the channel's scale); their error is capped there."""
+    e = (pred - s.y) / s.scale
+    bad = ~np.all(np.isfinite(e) & (np.abs(np.nan_to_num(e)) <= FAILED_ERROR), axis=-1)
+    e = np.clip(np.nan_to_num(e, nan=FAILED_ERROR, posinf=FAILED_ERROR, neginf=-FAILED_ERROR), -FAILED_ERROR, FAILED_ERROR)
+    return e, bad.sum(axis=-1)
 
 
 def residual(model: Model, s: ResponseSet) -> tuple[np.ndarray, int]:
-    """Normalised output error (N, k) and the number of samples a failed solve left non-finite or
-    a diverged one put beyond ``FAILED_ERROR`` (1000 % of the channel's scale); their error is
-    capped there."""
-    e = (predict(model, s) - s.y) / s.scale
-    bad = ~np.all(np.isfinite(e) & (np.abs(np.nan_to_num(e)) <= FAILED_ERROR), axis=1)
-    e = np.clip(np.nan_to_num(e, nan=FAILED_ERROR, posinf=FAILED_ERROR, neginf=-FAILED_ERROR), -FAILED_ERROR, FAILED_ERROR)
-    return e, int(bad.sum())
+    """:func:`error` of the model's simulation of ``s``."""
+    e, bad = error(predict(model, s), s)
+    return e, int(bad)

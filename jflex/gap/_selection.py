@@ -113,7 +113,7 @@ class Selection:
 
 def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
                    simpler=None, first=None, on_select=None, min_first_shrink=0.0,
-                   significant: bool | None = None) -> Selection:
+                   significant: bool | None = None, refine=None) -> Selection:
     """Forward selection on held-out data, the rules of :func:`diagnose`: each round refits every
     candidate not yet added on top of the current model, takes the one closing the most of the
     current excess gap (rounded to a point, so that noise-level differences tie; the information
@@ -140,6 +140,8 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
       close that share (two real effects that each explain part of one gap), else none is.
     - ``significant``: whether the nominal gap is significant (default: :func:`is_significant`),
       e.g. also when a candidate is :func:`decisive` evidence.
+    - ``refine(step) -> (state, ev)``: optional; the taken step's model refined (e.g. a costly
+      identification done only for what was selected) before the next round builds on it.
     """
     if not (is_significant(ev0, floor) if significant is None else significant):
         return Selection([], state0, ev0, "not significant")
@@ -190,6 +192,9 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             if step.score < DECISIVE_SCORE:
                 return Selection(steps, state, ev_cur, "weak", step)
             weak = (step, need)
+        if refine is not None:
+            st_r, ev_r = refine(step)
+            step = dataclasses.replace(step, state=st_r, ev=ev_r)
         steps.append(step)
         chosen.append(step.cand)
         state, ev_cur = step.state, step.ev

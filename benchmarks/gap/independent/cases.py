@@ -20,6 +20,7 @@ import yaml
 from . import frf as F
 from . import robots as R
 from . import signals as S
+from . import tip as TP
 from . import torque as TQ
 
 IN_LIBRARY_TORQUE = ("viscous_friction", "coulomb_friction", "stribeck_friction", "rotor_inertia", "payload",
@@ -316,10 +317,51 @@ def freq_case(folder, kind, robot, effects, seed, small=False):
     return _write(folder, nom, tool, robot, nominal, datasets, truth, noise)
 
 
+# --- tip cases --------------------------------------------------------------------------------------
+def tip_case(folder, robot, effects, seed, small=False, cad_error=False):
+    """Tool positions only (a tracker's view) under applied torques, from rest at a drawn posture:
+    two training records and one validation record, 1 s each at 200 Hz, 0.1 mm white noise; the
+    rotor inertias stated as nominal values. ``effects``: () or ("joint_flexibility",): a spring
+    at a drawn joint whose mode lies at 4-12 Hz. ``cad_error``: the case's robot a few per cent off
+    (tip records alone cannot identify the inertias; off by default)."""
+    rng = np.random.default_rng(seed)
+    true, tool, home = R.true_model(robot)
+    nom, cad = R.cad_error(true, rng) if cad_error else (true, [])
+    n = true.nq
+    data = true.createData()
+    Mh = np.diag(pin.crba(true, data, home))
+    rotor = Mh * rng.uniform(0.15, 0.3, n)
+    flex, truth_eff = None, []
+    for eff in effects:
+        if eff != "joint_flexibility":
+            raise KeyError(f"tip cases plant joint_flexibility only, got {eff!r}")
+        j = int(rng.integers(0, n))
+        f = rng.uniform(4.0, 12.0)  # [Hz] the motor's mode on its spring
+        k = float((2 * np.pi * f) ** 2 * rotor[j])
+        c = float(2 * rng.uniform(0.03, 0.1) * np.sqrt(k * rotor[j]))
+        flex = (j, k, c)
+        truth_eff.append(dict(effect=eff, joint=_jn(true, j), params={"k": k, "c": c, "rotor_inertia": float(rotor[j])},
+                              in_library=True))
+    fs, T = 200.0, 0.6 if small else 1.0
+    amp = _amp(true, home, 0.25)
+    datasets = []
+    for i, split in enumerate(["train", "train", "validation"]):
+        q0 = home + rng.uniform(-0.4, 0.4, n) * (amp > 0.1)
+        t, q, qd, qdd = TP.rest_motion(rng, q0, T, fs, amp=amp)
+        tau = TP.applied_torques(true, rotor, q, qd, qdd)
+        y = TP.simulate_tip(true, tool, rotor, t, tau, q0, flex) + 1e-4 * rng.standard_normal((t.size, 3))
+        datasets.append(("response", f"tip{i}", split, dict(t=t, tau=tau, y=y, channels=np.array(["tip_x", "tip_y", "tip_z"]),
+                                                            q0=q0)))
+    nominal = [dict(effect="rotor_inertia", joint="all", value=[float(v) for v in rotor])]
+    truth = dict(kind="tip", robot=robot, family=family(effects), effects=truth_eff, expected_verdict=_expected(effects),
+                 cad_error=cad)
+    return _write(folder, nom, tool, robot, nominal, datasets, truth)
+
+
 def make_case(folder, kind="torque", robot="arm3", effects=(), seed=0, small=False) -> tuple[pathlib.Path, dict]:
     """Write one case folder (``case.yaml``, ``robot.urdf``, NPZ files, ``truth.json``).
 
-    **Arguments:** ``folder``; ``kind``: torque | frf | modal; ``robot``: arm3 | ur5 | panda;
+    **Arguments:** ``folder``; ``kind``: torque | frf | modal | tip; ``robot``: arm3 | ur5 | panda;
     ``effects``: hidden effect names (library names, or out-of-library ``cogging``,
     ``gain_drift``, ``torque_deadzone`` for torque data, ``rocking_base``, ``posture_bearing`` for
     frf/modal data; empty: a null case); ``seed``; ``small``: short records (3 s torque records,
@@ -330,17 +372,20 @@ def make_case(folder, kind="torque", robot="arm3", effects=(), seed=0, small=Fal
     effects = tuple(effects)
     if kind == "torque":
         out = torque_case(folder, robot, effects, seed, small)
+    elif kind == "tip":
+        out = tip_case(folder, robot, effects, seed, small)
     elif kind in ("frf", "modal"):
         out = freq_case(folder, kind, robot, effects, seed, small)
     else:
-        raise ValueError(f"kind: expected torque, frf or modal, got {kind!r}")
+        raise ValueError(f"kind: expected torque, frf, modal or tip, got {kind!r}")
     return out, json.loads((out / "truth.json").read_text())
 
 
 # --- the bench's list of cases --------------------------------------------------------------------
 def plan(size: str = "small") -> list[dict]:
     """Cases of the bench: ``id``, ``kind``, ``robot``, ``effects``, ``seed``. ``small``: 11 cases,
-    every family (single, pair, out-of-library, null) and data kind; ``full``: 38."""
+    every family (single, pair, out-of-library, null) and data kind; ``full``: 38 (the last two tip
+    records only)."""
     S_ = [("torque", "arm3", ("stribeck_friction",)), ("torque", "ur5", ("payload",)),
           ("torque", "arm3", ("joint_flexibility",)), ("frf", "arm3", ("orthogonal_compliance",)),
           ("modal", "arm3", ("payload",)), ("torque", "panda", ("coulomb_friction", "sensor_delay")),
@@ -358,6 +403,8 @@ def plan(size: str = "small") -> list[dict]:
         S_ += [("torque", "arm3", ("cogging",)), ("torque", "ur5", ("gain_drift",)), ("torque", "panda", ("torque_deadzone",)),
                ("frf", "arm3", ("rocking_base",)), ("frf", "arm3", ("posture_bearing",)), ("modal", "arm3", ("posture_bearing",))]
         S_ += [("torque", r, ()) for r in robots] + [("frf", "arm3", ()), ("frf", "ur5", ()), ("modal", "arm3", ())]
+        # tool positions only: a flexible joint only a simulation shows, and a null case
+        S_ += [("tip", "arm3", ("joint_flexibility",)), ("tip", "arm3", ())]
     out = []
     for i, (kind, robot, eff) in enumerate(S_):
         out.append(dict(id=f"{i:02d}_{kind}_{robot}_{'+'.join(eff) or 'null'}", kind=kind, robot=robot, effects=list(eff),
