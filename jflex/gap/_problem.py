@@ -63,6 +63,7 @@ class State:
     x: np.ndarray | None
     added: tuple = ()
     springs: tuple = ()  # ((joint, (k, c, I_m)), ...) fitted through the simulation (:mod:`._simulated`)
+    starts: tuple = ()  # ((joint, ((k, c, I_m), ...)), ...) the screening's starts for their identification
 
 
 def _is_torque(d) -> bool:
@@ -283,9 +284,12 @@ class Problem:
         if cand.effect in SIMULATED_EFFECTS and self.rtrain and not (self.ftrain and lm is not None):
             # no FRF/modal data place the spring: the output-error training records do
             held = State(tfit, lm, x, state.added, springs)
-            k = scan_spring(self.robot, tfit, self.sim_springs(held), self._rotor(), cand.joint, self.rtrain)
-            springs = tuple((j, v) for j, v in springs if j != cand.joint) + ((cand.joint, k),)
-        return State(tfit, lm, x, state.added + (cand,), springs)
+            found = scan_spring(self.robot, tfit, self.sim_springs(held), self._rotor(), cand.joint, self.rtrain, basins=BASINS)
+            springs = tuple((j, v) for j, v in springs if j != cand.joint) + ((cand.joint, found[0]),)
+            starts = dict(state.starts)
+            starts[cand.joint] = tuple(found)
+            return State(tfit, lm, x, state.added + (cand,), springs, tuple(starts.items()))
+        return State(tfit, lm, x, state.added + (cand,), springs, state.starts)
 
     def _add_linear(self, lm, x, cand):
         st = lm.structure
@@ -499,8 +503,11 @@ class Problem:
         for j in joints:
             others = dict(self.sim_springs(dataclasses.replace(state, springs=())))
             others.update({i: v for i, v in springs.items() if i != j})
-            starts = scan_spring(self.robot, state.tfit, others, self._rotor(), j, self.rtrain, basins=BASINS)
-            springs[j] = polish_spring(self.robot, state.tfit, others, self._rotor(), j, starts, self.rtrain)
+            # the screening's starts (the springs held then are the ones held now: a spring is
+            # identified as soon as it is selected)
+            starts = dict(state.starts).get(j) or scan_spring(self.robot, state.tfit, others, self._rotor(), j, self.rtrain,
+                                                            basins=BASINS)
+            springs[j] = polish_spring(self.robot, state.tfit, others, self._rotor(), j, list(starts), self.rtrain)
         return dataclasses.replace(state, springs=tuple(springs.items()))
 
     def _rotor(self):

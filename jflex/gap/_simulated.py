@@ -32,7 +32,7 @@ from . import _response as R
 K_GRID = 17  # stiffnesses scanned (log-spaced) before the local fit
 BASINS = 2  # starts of the identification: the best of the scan and the best of another basin in k
 OTHER_BASIN = 3.0  # ... identified only when its start's training cost is within this factor of the first's result
-MAX_STEPS = 15  # Levenberg-Marquardt steps of the local fit (each: one forward-mode simulation per parameter)
+MAX_STEPS = 10  # Levenberg-Marquardt steps of the local fit (each: one forward-mode simulation per parameter)
 ZETAS = (0.01, 0.02, 0.04, 0.08, 0.15, 0.3)  # damping ratios of the spring's own mode scanned with the stiffness
 
 
