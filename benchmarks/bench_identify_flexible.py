@@ -60,6 +60,17 @@ def _postures(n, seed=1):
     return lo + (hi - lo) * rng.uniform(size=(n, 6))
 
 
+
+def _timed(fn, u, reps=3):
+    """``(fn(u), first-call seconds (compile + run), seconds per later call)``."""
+    t0 = time.perf_counter()
+    out = np.asarray(fn(u))
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        jax.block_until_ready(fn(u))
+    return out, first, (time.perf_counter() - t0) / reps
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--postures", type=int, default=20)
@@ -108,21 +119,9 @@ def main(argv=None):
         return idf.residual_vector(spec.apply(start, u), data)
 
     r_jit = jax.jit(resid)
-    t0 = time.perf_counter()
-    r0 = np.asarray(r_jit(u0))
-    compile_res = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for _ in range(3):
-        jax.block_until_ready(r_jit(u0))
-    t_res = (time.perf_counter() - t0) / 3
+    r0, compile_res, t_res = _timed(r_jit, u0)
     jac_fn = jax.jit(jax.jacfwd(resid) if a.jac == "fwd" else jax.jacrev(resid))
-    t0 = time.perf_counter()
-    J0 = np.asarray(jac_fn(u0))
-    compile_jac = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for _ in range(3):
-        jax.block_until_ready(jac_fn(u0))
-    t_jac = (time.perf_counter() - t0) / 3
+    J0, compile_jac, t_jac = _timed(jac_fn, u0)
     sv = np.linalg.svd(J0, compute_uv=False)
 
     def cost(u):

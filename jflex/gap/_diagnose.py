@@ -24,7 +24,7 @@ from ._case import Case, load_case
 from ._frequency_inertia import cad_spread
 from ._inertia import link_moves
 from ._noise import noise_floor
-from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
+from ._problem import CONFOUNDED, SIMULATED_EFFECTS, Candidate, Problem, State, parameters
 from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
                          decisive, is_significant, rank_entries, step_record, stop_reason, verdict)
 from ._signatures import SIGNATURE_NAMES, n_params, signatures
@@ -152,17 +152,15 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     def refine(step):
         # a spring screened by simulation is identified (output error through jflex.simulate) once it
         # is selected, before the next round builds on it: one costly fit per selected spring
-        new = [j for j, _ in step.state.springs if j not in dict(sel_springs)]
-        if not new:
+        j = step.cand.joint
+        if step.cand.effect not in SIMULATED_EFFECTS or j not in dict(step.state.springs):
             return step.state, step.ev
-        say(f"identifying the spring at {pb.names[new[0]]} through the simulation")
-        st = pb.polish(step.state, new)
+        say(f"identifying the spring at {pb.names[j]} through the simulation")
+        st = pb.polish(step.state, [j])
         ev = pb.evaluate(st)
-        simulated[pb.names[new[0]]] = dict(gap_screened=gap_summary(step.ev, floor)[0], gap_identified=gap_summary(ev, floor)[0])
-        sel_springs.extend(st.springs)
+        simulated[pb.names[j]] = dict(gap_screened=gap_summary(step.ev, floor)[0], gap_identified=gap_summary(ev, floor)[0])
         return st, ev
 
-    sel_springs = list(nom.springs)
     sel = forward_select(nom, ev0, floor, pool, refit, refine=refine, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain)), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select, significant=significant,

@@ -99,8 +99,7 @@ class Problem:
                         if self.ttrain and self.options["refit_inertia"] else None)
         self.ftrain = [d for d in case.datasets if d.split == "train" and d.kind in ("frf", "modal")]
         self.fval = [d for d in case.datasets if d.split == "validation" and d.kind in ("frf", "modal")]
-        # the others are simulated under their applied torques and compared as output error, on
-        # validation only: a refit through the simulation would cost one nonlinear fit per candidate
+        # the others are simulated under their applied torques and compared as output error
         self.rval = [R.response_set(self.robot, d, case.tool_frame) for d in case.split("validation") if _is_output_error(d)]
         # training records of that kind fit the candidates only a simulation shows (:mod:`._simulated`)
         self.rtrain = [R.response_set(self.robot, d, case.tool_frame) for d in case.split("train") if _is_output_error(d)]
@@ -501,8 +500,8 @@ class Problem:
         (:func:`._simulated.polish_spring`), the others held."""
         springs = dict(state.springs)
         for j in joints:
-            others = dict(self.sim_springs(dataclasses.replace(state, springs=())))
-            others.update({i: v for i, v in springs.items() if i != j})
+            held = dataclasses.replace(state, springs=tuple(springs.items()))
+            others = {i: v for i, v in self.sim_springs(held).items() if i != j}
             # the screening's starts (the springs held then are the ones held now: a spring is
             # identified as soon as it is selected)
             starts = dict(state.starts).get(j) or scan_spring(self.robot, state.tfit, others, self._rotor(), j, self.rtrain,

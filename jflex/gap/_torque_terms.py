@@ -103,22 +103,6 @@ class LawTerm(TorqueTerm):
     def contribute(self, parts, theta) -> None:
         parts.add(self.effect, self.joint, theta, self.hyper)
 
-    @classmethod
-    def kind(cls, name):
-        """The constructor of family ``name``'s terms, ``(joint, hyper=None) -> LawTerm``; its
-        nominal hyper-parameter is the middle of the grid."""
-        meta = FAMILY_META[name]
-
-        def make(joint=None, hyper=None):
-            if hyper is None and meta.hyper is not None:
-                hyper = meta.hyper[1][len(meta.hyper[1]) // 2]
-            return cls(name, joint, hyper)
-
-        make.per_joint = meta.per_joint
-        make.subsumed_by = meta.subsumed_by
-        make.signature = meta.signature
-        return make
-
 
 # --- a joint's compliance, seen in torque data -----------------------------------------------------
 @jax.jit
@@ -353,20 +337,39 @@ class SensorDelay(TorqueTerm):
 
 
 # --- the table ---------------------------------------------------------------------------------------
-def _kinds() -> dict:
-    k = {name: LawTerm.kind(name) for name in FAMILIES[:5]}
-    k["backlash"] = backlash
-    k["payload"] = LawTerm.kind("payload")
-    k["sensor_delay"] = lambda joint=None, hyper=None: SensorDelay(None, 0.0 if hyper is None else float(hyper))
-    k["joint_flexibility"] = lambda joint, hyper=None: CompliantJoint(joint)
-    for name, cls in (("backlash", Play), ("sensor_delay", SensorDelay), ("joint_flexibility", CompliantJoint)):
-        k[name].per_joint, k[name].subsumed_by, k[name].signature = cls.per_joint, None, cls.signature
-    return k
+@dataclasses.dataclass(frozen=True)
+class Kind:
+    """A torque-side candidate: ``make(joint, hyper)`` builds its term (``hyper`` None: the
+    default); ``per_joint`` (else one for the whole robot), ``subsumed_by`` (a nominal kind at the
+    same joint that already holds it) and ``signature`` (what its residual looks like)."""
+
+    make: object
+    per_joint: bool = True
+    subsumed_by: str | None = None
+    signature: str = ""
+
+    def __call__(self, joint=None, hyper=None) -> TorqueTerm:
+        return self.make(joint, hyper)
 
 
-# the torque-side candidates by name, in the order the diagnosis tries them: ``KINDS[name](joint,
-# hyper=None)`` makes a term; each constructor carries ``per_joint``, ``subsumed_by`` and ``signature``
-KINDS = _kinds()
+def _law(name) -> Kind:
+    meta = FAMILY_META[name]
+
+    def make(joint, hyper):
+        if hyper is None and meta.hyper is not None:
+            hyper = meta.hyper[1][len(meta.hyper[1]) // 2]  # the nominal one: the middle of the grid
+        return LawTerm(name, joint, hyper)
+
+    return Kind(make, meta.per_joint, meta.subsumed_by, meta.signature)
+
+
+# the torque-side candidates by name, in the order the diagnosis tries them
+KINDS = {name: _law(name) for name in FAMILIES[:5]}
+KINDS["backlash"] = Kind(backlash, signature=Play.signature)
+KINDS["payload"] = _law("payload")
+KINDS["sensor_delay"] = Kind(lambda joint, hyper: SensorDelay(None, 0.0 if hyper is None else float(hyper)),
+                             per_joint=False, signature=SensorDelay.signature)
+KINDS["joint_flexibility"] = Kind(lambda joint, hyper: CompliantJoint(joint), signature=CompliantJoint.signature)
 
 
 def make_term(name: str, joint=None, hyper=None) -> TorqueTerm:
