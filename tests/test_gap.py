@@ -290,6 +290,21 @@ def test_a_damping_law_defined_outside_gap_is_a_frequency_candidate():
             return (cls(1.0),)
 
     assert law_candidates()["ring_damping"] is Ring
+    # its kind: tried at the nominally flexible joints only, one parameter (no exponent), and a
+    # case may name it
+    from jflex.gap._frequency_kinds import frequency_kinds
+    from jflex.gap._problem import Candidate
+    from jflex.gap._signatures import n_params
+
+    kind = frequency_kinds()["ring_damping"]
+    assert kind.law is Ring and kind.per_joint
+    assert n_params(Candidate("ring_damping", 0), torque=False) == 1
+    assert n_params(Candidate("fractional_damping", 0), torque=False) == 2  # its order is freed too
+
+    class _Pb:  # what the kind asks of the problem
+        nominal = {("ring_damping", 2)}
+
+    assert [kind.tried_at(_Pb, j, {1, 2}) for j in range(3)] == [False, True, False]
     w = np.array([4.0, 100.0])
     np.testing.assert_allclose(L.unit_loss(Ring(), w), 1j * np.sqrt(w), rtol=1e-12)
     # the modal iteration's table: exact on power laws, within its stated 1e-5 on others

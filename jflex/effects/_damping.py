@@ -42,12 +42,14 @@ class AbstractDampingLaw(eqx.Module):
       Kelvin-Voigt law every spring already has);
     - ``shape``: ``(leaf, low, high)`` of a structural exponent the fit refines within bounds
       (the fractional order), or None;
-    - :meth:`prototypes`: the law with unit loss, one per start value of its exponent.
+    - :meth:`prototypes`: the law with unit loss, one per start value of its exponent;
+    - ``signature``: what the law's loss looks like in measured data (a report's hint).
     """
 
     loss: ClassVar[str | None] = None
     candidate: ClassVar[str | None] = None
     shape: ClassVar[tuple | None] = None
+    signature: ClassVar[str] = ""
 
     @classmethod
     def prototypes(cls) -> tuple:

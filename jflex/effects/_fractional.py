@@ -78,6 +78,7 @@ class Fractional(AbstractDampingLaw):
     loss: ClassVar[str] = "k_e"
     candidate: ClassVar[str] = "fractional_damping"
     shape: ClassVar[tuple] = ("alpha", 0.1, 0.95)
+    signature: ClassVar[str] = "damping ratio growing as w^(alpha-1)"
 
     @classmethod
     def prototypes(cls) -> tuple:

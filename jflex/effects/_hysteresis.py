@@ -78,6 +78,7 @@ class Hysteretic(AbstractDampingLaw):
     reversal_width: jnp.ndarray | None
     loss: ClassVar[str] = "eta"
     candidate: ClassVar[str] = "hysteretic_damping"
+    signature: ClassVar[str] = "damping ratio flat in frequency"
 
     @classmethod
     def prototypes(cls) -> tuple:

@@ -27,7 +27,8 @@ from ._noise import noise_floor
 from ._problem import CONFOUNDED, SIMULATED_EFFECTS, Candidate, Problem, State, parameters
 from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
                          decisive, is_significant, rank_entries, step_record, stop_reason, verdict)
-from ._signatures import SIGNATURE_NAMES, n_params, signatures
+from ._frequency_kinds import frequency_kinds
+from ._signatures import n_params, signature_name, signatures
 from ._where import where
 
 @dataclasses.dataclass
@@ -46,13 +47,14 @@ def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None):
     _, _, exc0 = gap_summary(ev0, floor)
     shrink = 100.0 * (1 - exc / exc0) if exc0 > 0 else 0.0
     g0 = gap_summary(ev0, floor)[0]
-    e = dict(effect=c.effect, joint=None if c.joint is None or c.effect == "link_flexibility" else problem.names[c.joint],
-             link=problem.robot.link_names[c.joint] if c.effect == "link_flexibility" else None,
+    on_link = getattr(frequency_kinds().get(c.effect), "on_link", False)
+    e = dict(effect=c.effect, joint=None if c.joint is None or on_link else problem.names[c.joint],
+             link=problem.robot.link_names[c.joint] if on_link else None,
              score=float(score), gap_after=gap, shrink=float(np.clip(shrink, 0, 100)),
              shrink_raw=float(100 * (1 - gap / g0)) if g0 > 0 else 0.0,
              per_dataset={k: v["nrmse"] for k, v in ev.items()})
     if sig is not None:
-        e["signature"] = {"name": SIGNATURE_NAMES[c.effect], "value": float(sig)}
+        e["signature"] = {"name": signature_name(c.effect), "value": float(sig)}
     return e
 
 

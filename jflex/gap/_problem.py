@@ -8,14 +8,11 @@ from __future__ import annotations
 
 import dataclasses
 
-import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
-
-from ..effects import damping_laws
 
 from ._case import Case
 from ._effect_term import EffectCandidate, EffectTerm
+from ._frequency_kinds import frequency_kinds, law_candidates
 from ._frequency_inertia import refit_linear_inertia, shifted
 from ._noise import fits_to_noise
 from ._simulated import BASINS, polish_spring, scan_spring
@@ -26,13 +23,7 @@ from . import _torque as T
 from ._torque_terms import KINDS, make_term
 
 TORQUE_EFFECTS = tuple(KINDS)
-LINEAR_EFFECTS = ("joint_flexibility", "orthogonal_compliance", "link_flexibility", "payload")
 SIMULATED_EFFECTS = ("joint_flexibility",)  # refitted through jflex.simulate on output-error training records
-# the damping laws of jflex.effects (and any a user defined) that name themselves candidates: each is
-# tried at every flexible joint, its small-motion law read off the law itself (:mod:`._frequency_model`)
-def law_candidates() -> dict:
-    """``{candidate name: law class}``, read when asked (a law defined after import counts too)."""
-    return {c.candidate: c for c in damping_laws()}
 # pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
 CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
                                      ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
@@ -248,18 +239,10 @@ class Problem:
             out += list(self.user)
         if self.ftrain:
             flex = {s.where for s in self._nominal_springs()}
+            kinds = frequency_kinds()
             for j in range(self.n):
-                if j not in flex:
-                    out.append(Candidate("joint_flexibility", j))
-                out.append(Candidate("orthogonal_compliance", j))
-                out.append(Candidate("link_flexibility", j))
-                if j in flex:
-                    # every damping law of jflex.effects that names itself a candidate
-                    for name in law_candidates():
-                        if (name, j) not in self.nominal:
-                            out.append(Candidate(name, j))
-            if "payload" not in nom and not self.ttrain:
-                out.append(Candidate("payload", None))
+                out += [Candidate(name, j) for name, k in kinds.items() if k.per_joint and k.tried_at(self, j, flex)]
+            out += [Candidate(name, None) for name, k in kinds.items() if not k.per_joint and k.tried_at(self, None, flex)]
         if self.rtrain and self.rval:
             flex = {s.where for s in self._nominal_springs()}
             out += [Candidate(e, j) for e in SIMULATED_EFFECTS for j in range(self.n) if j not in flex]
@@ -277,8 +260,9 @@ class Problem:
             tfit = T.fit_with(tfit.terms, tfit.delay, EffectTerm(self.user[cand], cand.joint), self.ttrain, self.inertia)
         elif cand.effect in KINDS and self.ttrain:
             tfit = T.fit_with(tfit.terms, tfit.delay, make_term(cand.effect, cand.joint), self.ttrain, self.inertia)
-        if (cand.effect in LINEAR_EFFECTS or cand.effect in law_candidates()) and self.ftrain and lm is not None:
-            lm, x = self._add_linear(lm, x, cand)
+        kind = frequency_kinds().get(cand.effect)
+        if kind is not None and self.ftrain and lm is not None:
+            lm, x = kind.add(self, lm, x, cand.joint)
         springs = state.springs
         if cand.effect in SIMULATED_EFFECTS and self.rtrain and not (self.ftrain and lm is not None):
             # no FRF/modal data place the spring: the output-error training records do
@@ -289,146 +273,6 @@ class Problem:
             starts[cand.joint] = tuple(found)
             return State(tfit, lm, x, state.added + (cand,), springs, tuple(starts.items()))
         return State(tfit, lm, x, state.added + (cand,), springs, state.starts)
-
-    def _add_linear(self, lm, x, cand):
-        st = lm.structure
-        S = len(st.springs)
-        ks, cs = list(x[:S]), list(x[S:2 * S])
-        pay = list(x[2 * S:2 * S + 1]) if st.payload else []
-        cpl = list(x[2 * S + len(pay):])  # couplings of virtual pairs already in the model
-        springs = list(st.springs)
-        if cand.effect in law_candidates():
-            i = next(i for i, s in enumerate(springs) if s.kind == "joint" and s.where == cand.joint)
-            cls = law_candidates()[cand.effect]
-            shape = cls.shape
-            tried = {}
-
-            def fit_law(proto):
-                key = L.law_key(proto)
-                sp = list(springs)
-                sp[i] = dataclasses.replace(sp[i], law=proto)
-                lm2 = self._frequency_model(lm.robot, L.Structure(tuple(sp), st.payload))
-                lm2._cache = lm._cache  # same geometry and postures: the matrices carry over
-                x2 = np.array(x, float)
-                w = 2 * np.pi * self._ref_freq()
-                c = np.exp(x2[S + i])
-                # the same loss at the reference frequency as the viscous damping it replaces is only a
-                # guess (the spring's own mode may lie elsewhere): scan the new loss around it, then
-                # fit everything from the best (no peaks phase: the picked peaks' half-power damping
-                # is what a damping law must not chase)
-                c0 = np.log(w * c / np.abs(L.unit_loss(proto, w)))
-                best0 = None
-                for dc in np.arange(-3.0, 3.01, 0.5):
-                    x2[S + i] = c0 + dc
-                    r = L.residual(lm2, x2, self.ftrain, peaks=False)
-                    if best0 is None or r @ r < best0[0]:
-                        best0 = (float(r @ r), x2.copy())
-                xf, cost = L.fit_linear(lm2, best0[1], self.ftrain, peaks_first=False)
-                tried[key[1] if shape else 0.0] = (cost, lm2, xf)
-                return cost
-
-            protos = cls.prototypes()
-            for proto in protos:
-                fit_law(proto)
-            if shape is not None:
-                # refine the exponent: steps of 0.1, 0.05 and 0.025 either side of the best value tried,
-                # then the vertex of a parabola through the best and its (now close) neighbours (one
-                # parabola through the wide grid stopped 0.07 off the fractional order)
-                leaf, lo_a, hi_a = shape
-                at = lambda a: eqx.tree_at(lambda l: getattr(l, leaf), protos[0], jnp.asarray(a))
-                best_a = lambda: min(tried, key=lambda a: tried[a][0])
-                for h in (0.1, 0.05, 0.025):
-                    a0 = best_a()
-                    for a_new in (a0 - h, a0 + h):
-                        a_new = round(float(np.clip(a_new, lo_a, hi_a)), 3)
-                        if a_new not in tried:
-                            fit_law(at(a_new))
-                al = sorted(tried)
-                kb = min(max(al.index(best_a()), 1), len(al) - 2)
-                xa = np.array(al[kb - 1:kb + 2])
-                ya = np.log(np.array([tried[a][0] for a in xa]))
-                cpar = np.polyfit(xa - xa[1], ya, 2)
-                if cpar[0] > 0:
-                    a_new = round(float(np.clip(xa[1] - cpar[1] / (2 * cpar[0]), xa[0], xa[2])), 3)
-                    if a_new not in tried:
-                        fit_law(at(a_new))
-            cost, lm2, xf = min(tried.values(), key=lambda t: t[0])
-            return lm2, xf
-        if cand.effect == "payload":
-            st2 = L.Structure(tuple(springs), True)
-            lm2 = self._frequency_model(lm.robot, st2)
-            xs = [np.concatenate([ks, cs, [np.log(m)], cpl]) for m in (0.1, 1.0, 10.0)]
-            xf, _ = L.fit_linear(lm2, xs[0], self.ftrain, starts=xs[1:])
-            return lm2, xf
-        if cand.effect == "joint_flexibility":
-            new = [L.Site("joint", cand.joint)]
-        elif cand.effect == "orthogonal_compliance":
-            # a bearing's tilt stiffness: a full 2x2 (coupled) stiffness about the two axes
-            new = [L.Site("orth", cand.joint, 0), L.Site("orth", cand.joint, 1, coupled=True)]
-        else:
-            new = [L.Site("link", cand.joint, 0), L.Site("link", cand.joint, 1, coupled=True)]
-        sp = springs + new
-        lm2 = self._frequency_model(lm.robot, L.Structure(tuple(sp), st.payload))
-        # starting stiffnesses: the new spring(s) alone would put a mode at f_t; f_t is scanned over a
-        # log grid from below the measured band to well above it (a compliance whose modes lie
-        # above the band shows only as a posture-dependent static softening), both springs of a
-        # pair together and each alone stiff, keeping the starts with the lowest misfit. (One start
-        # at the frequency of the largest misfit put link modes far below the band, from where the
-        # bounded fit could not return.)
-        P = lm2.mats(self._ref_posture())
-        f_lo, f_hi = self._freq_band()
-        targets = list(np.geomspace(f_lo, 3.0 * f_hi, 12)) + self._unmatched_freqs(lm, x)[:1]
-        meff = [max(P.M[S + s, S + s], 1e-9) for s in range(len(new))]
-
-        def start(fts):
-            nk = [np.log((2 * np.pi * ft) ** 2 * m) for ft, m in zip(fts, meff)]
-            nc = [np.log(2 * 0.02 * np.sqrt(np.exp(k) * m)) for k, m in zip(nk, meff)]
-            return np.concatenate([ks, nk, cs, nc, pay, cpl, np.zeros(len(new) - 1)])
-
-        grid = [[ft] * len(new) for ft in targets]
-        if len(new) == 2:
-            grid += [[ft, 10 * f_hi] for ft in targets] + [[10 * f_hi, ft] for ft in targets]
-        scored = []
-        for fts in grid:
-            xs = start(fts)
-            r = L.residual(lm2, xs, self.ftrain, peaks=False)
-            scored.append((float(r @ r), len(scored), xs))
-        scored.sort(key=lambda t: t[:2])
-        starts = [t[2] for t in scored[:2]]
-        # and the new modes near the measured mode the model misses most (where the nominal fit is
-        # far off, the grid's misfit says little: a peaks phase first sorts the modes out)
-        P0 = P.M[:S, :S]
-        for ft in self._unmatched_freqs(lm, x)[:1]:
-            for scale in (0.6, 1.6):
-                nk, nc = [], []
-                for s in range(len(new)):
-                    ii = S + s
-                    # (pinv: a site carrying no inertia of its own leaves P0 singular)
-                    me = max(P.M[ii, ii] - P.M[ii, :S] @ (np.linalg.pinv(P0) @ P.M[:S, ii]) if S else P.M[ii, ii], 1e-9)
-                    k = scale * (2 * np.pi * ft) ** 2 * me * (1.0 + 0.5 * s)
-                    nk.append(np.log(k))
-                    nc.append(np.log(2 * 0.02 * np.sqrt(k * me)))
-                starts.append(np.concatenate([ks, nk, cs, nc, pay, cpl, np.zeros(len(new) - 1)]))
-        # from each start: first the new stiffness(es) alone, the nominal springs and the new
-        # damping held (freed here, the damping of a misplaced new mode ran to zero, hiding the
-        # mode between the fitted frequencies); then everything
-        Sn = len(sp)
-        free = np.zeros(len(starts[0]), bool)
-        free[S:Sn] = True
-        # a new pair's coupling is held at zero from every start and freed once, from the best
-        # (the uncoupled fit puts the pair's modes in place; the coupling then turns its axes)
-        nc_new = len(starts[0]) - 2 * Sn - len(pay) - len(cpl)
-        held = np.ones(len(starts[0]), bool)
-        held[len(held) - nc_new:] = False
-        best = None
-        for x0 in starts:
-            x1, _ = L.fit_linear(lm2, x0, self.ftrain, free=free)
-            xf, cost = L.fit_linear(lm2, x1, self.ftrain, free=held, peaks_first=False)
-            if best is None or cost < best[0]:
-                best = (cost, xf)
-        if nc_new:
-            best = L.fit_linear(lm2, best[1], self.ftrain, peaks_first=False)[::-1]
-        return lm2, best[1]
 
     def _frequency_model(self, robot, structure):
         return L.FrequencyModel(robot, structure, self.case.tool_frame)

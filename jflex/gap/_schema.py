@@ -13,16 +13,16 @@ from pydantic import Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from .._schema import Strict, markdown_table
+from ._frequency_kinds import frequency_kinds
+from ._torque_terms import KINDS as TORQUE_KINDS
 
 KINDS = ("torque", "frf", "modal", "response")
 SPLITS = ("train", "validation")
 
-# Every candidate name of the library (issue 6); nominal effects are named from the same list.
-EFFECT_NAMES = (
-    "joint_flexibility", "link_flexibility", "viscous_friction", "coulomb_friction", "stribeck_friction",
-    "gravity_compensator", "payload", "rotor_inertia", "orthogonal_compliance", "fractional_damping",
-    "hysteretic_damping", "backlash", "sensor_delay",
-)
+# Every candidate name of the library, as its candidate kinds name themselves (the torque side's
+# and the frequency side's, the damping laws of jflex.effects among them); nominal effects are
+# named from the same list.
+EFFECT_NAMES = tuple(dict.fromkeys([*TORQUE_KINDS, *frequency_kinds()]))
 # nominal values an effect may state (every other coefficient is fitted)
 EFFECT_VALUES = {"joint_flexibility": ("stiffness", "damping"), "sensor_delay": ("value",), "rotor_inertia": ("value",)}
 

@@ -8,19 +8,20 @@ import numpy as np
 
 from ._problem import Candidate, Problem, State
 from . import _torque as T
-from ._torque_terms import BACKLASH_PULSES, KINDS, make_term
+from ._frequency_kinds import frequency_kinds
+from ._torque_terms import KINDS, make_term
 
 
 def n_params(c: Candidate, user=None, torque: bool = True) -> int:
-    """Parameters ``c`` adds; a payload is its 10 inertial parameters on torque data, one point
-    mass on FRF/modal data alone."""
+    """Parameters ``c`` adds (its kind's count, searched hyper-parameters included): the torque
+    side's when there are torque data (a payload's 10 inertial parameters), else the frequency
+    side's (a payload's one mass)."""
     if user and c in user:
         return user[c].size
-    if c.effect == "payload" and not torque:
-        return 1
-    return {"stribeck_friction": 3, "gravity_compensator": 4, "payload": 10, "orthogonal_compliance": 4,
-            "link_flexibility": 4, "joint_flexibility": 2, "fractional_damping": 2,
-            "backlash": 1 + len(BACKLASH_PULSES)}.get(c.effect, 1)
+    if torque and c.effect in KINDS:
+        return KINDS[c.effect].n_params
+    kind = frequency_kinds().get(c.effect)
+    return kind.n_params if kind is not None else KINDS[c.effect].n_params
 
 
 def signatures(problem: Problem, state: State, cands) -> dict:
@@ -47,9 +48,7 @@ def signatures(problem: Problem, state: State, cands) -> dict:
     return out
 
 
-# what each candidate's residual looks like: the torque-side kinds say it themselves
-SIGNATURE_NAMES = {
-    **{name: kind.signature for name, kind in KINDS.items()},
-    "orthogonal_compliance": "extra FRF peak / unmatched mode", "link_flexibility": "extra FRF peak / unmatched mode",
-    "hysteretic_damping": "damping ratio flat in frequency", "fractional_damping": "damping ratio growing as w^(alpha-1)",
-}
+def signature_name(effect: str) -> str:
+    """What a candidate's residual looks like: its kind says it (the torque side's first)."""
+    kind = KINDS.get(effect) or frequency_kinds().get(effect)
+    return kind.signature if kind is not None else ""

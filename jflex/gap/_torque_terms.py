@@ -340,10 +340,13 @@ class SensorDelay(TorqueTerm):
 @dataclasses.dataclass(frozen=True)
 class Kind:
     """A torque-side candidate: ``make(joint, hyper)`` builds its term (``hyper`` None: the
-    default); ``per_joint`` (else one for the whole robot), ``subsumed_by`` (a nominal kind at the
-    same joint that already holds it) and ``signature`` (what its residual looks like)."""
+    default); ``n_params`` (the parameters it adds, searched hyper-parameters included: the
+    information criterion's penalty), ``per_joint`` (else one for the whole robot), ``subsumed_by``
+    (a nominal kind at the same joint that already holds it) and ``signature`` (what its residual
+    looks like)."""
 
     make: object
+    n_params: int
     per_joint: bool = True
     subsumed_by: str | None = None
     signature: str = ""
@@ -360,16 +363,17 @@ def _law(name) -> Kind:
             hyper = meta.hyper[1][len(meta.hyper[1]) // 2]  # the nominal one: the middle of the grid
         return LawTerm(name, joint, hyper)
 
-    return Kind(make, meta.per_joint, meta.subsumed_by, meta.signature)
+    return Kind(make, len(meta.param_names) + int(meta.hyper is not None), meta.per_joint, meta.subsumed_by, meta.signature)
 
 
 # the torque-side candidates by name, in the order the diagnosis tries them
 KINDS = {name: _law(name) for name in FAMILIES[:5]}
-KINDS["backlash"] = Kind(backlash, signature=Play.signature)
+KINDS["backlash"] = Kind(backlash, 1 + len(BACKLASH_PULSES), signature=Play.signature)
 KINDS["payload"] = _law("payload")
-KINDS["sensor_delay"] = Kind(lambda joint, hyper: SensorDelay(None, 0.0 if hyper is None else float(hyper)),
+KINDS["sensor_delay"] = Kind(lambda joint, hyper: SensorDelay(None, 0.0 if hyper is None else float(hyper)), 1,
                              per_joint=False, signature=SensorDelay.signature)
-KINDS["joint_flexibility"] = Kind(lambda joint, hyper: CompliantJoint(joint), signature=CompliantJoint.signature)
+# counted as the joint's stiffness and damping, as on the frequency side (one candidate, one count)
+KINDS["joint_flexibility"] = Kind(lambda joint, hyper: CompliantJoint(joint), 2, signature=CompliantJoint.signature)
 
 
 def make_term(name: str, joint=None, hyper=None) -> TorqueTerm:
