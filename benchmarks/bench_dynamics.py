@@ -232,7 +232,16 @@ def main(argv=None):
     ap.add_argument("--deriv-batches", type=int, nargs="+", default=[1000, 100000])
     ap.add_argument("--deriv-algorithms", nargs="+", default=list(DERIV_ALGORITHMS), choices=list(DERIV_ALGORITHMS))
     ap.add_argument("--threads", type=int, default=2, help="threads of Pinocchio's *InParallel batches")
+    ap.add_argument("--host-devices", type=int, default=None,
+                    help="CPU devices jflex's batched rnea/aba of the derivatives section also split over "
+                         "(one core each; default: --threads, so both sides use as many cores)")
     args = ap.parse_args(argv)
+    hd = args.threads if args.host_devices is None else args.host_devices
+    flag = f"--xla_force_host_platform_device_count={hd}"
+    if hd > 1 and flag not in os.environ.get("XLA_FLAGS", "") and argv is None:
+        # XLA reads its flags once, when the backend starts: a fresh process
+        env = dict(os.environ, XLA_FLAGS=" ".join(filter(None, [os.environ.get("XLA_FLAGS"), flag])))
+        os.execve(sys.executable, [sys.executable, *sys.argv], env)
     tunable = "glibc.malloc.hugetlb=1"
     if args.malloc == "hugetlb" and tunable not in os.environ.get("GLIBC_TUNABLES", "") and argv is None:
         # glibc reads its tunables once at process start, so the setting needs a fresh process
@@ -284,7 +293,8 @@ def main(argv=None):
         pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
         (pathlib.Path(args.out) / "bench_dynamics.json").write_text(json.dumps({"jax": jax.__version__, "glibc_tunables": os.environ.get("GLIBC_TUNABLES"), "rows": rows}, indent=2))
     if args.section != "dynamics":
-        drows = bench_derivatives(robot, model, args.deriv_batches, args.deriv_algorithms, args.threads)
+        drows = bench_derivatives(robot, model, args.deriv_batches, args.deriv_algorithms, args.threads,
+                                  devices=jax.devices()[:hd] if hd > 1 else None)
         if args.out:
             (pathlib.Path(args.out) / "bench_derivatives.json").write_text(json.dumps({"jax": jax.__version__, "rows": drows}, indent=2))
     return rows
@@ -313,11 +323,13 @@ def pinocchio_batches():
     return sorted(n for n in dir(pin) if "InParallel" in n or n.endswith("Pool"))
 
 
-def bench_derivatives(robot, model, batches, algorithms, threads=2):
+def bench_derivatives(robot, model, batches, algorithms, threads=2, devices=None):
     """Per state: jflex batched (``jflex.batched``; RNEA and ABA as in ``bench_jflex``) against
     Pinocchio called one state at a time in a Python loop and, where this build has one, its
-    ``*InParallel`` batch on ``threads`` threads (a ModelPool). Results are checked on the first
-    ``CHECK`` states (the parallel batch on all of them) before any timing is reported."""
+    ``*InParallel`` batch on ``threads`` threads (a ModelPool); with ``devices`` (several CPU
+    devices, one core each), jflex's RNEA and ABA batches split over them too, against that
+    multi-threaded batch. Results are checked on the first ``CHECK`` states (the parallel batch
+    on all of them) before any timing is reported."""
     import pinocchio as pin
 
     found = pinocchio_batches()
@@ -366,6 +378,14 @@ def bench_derivatives(robot, model, batches, algorithms, threads=2):
                     raise SystemExit(f"{name}: Pinocchio's {par} differs from jflex by {pdiff:.1e}")
                 row["pinocchio_parallel_us"] = 1e6 * best_time(call) / N
                 row["pinocchio_parallel_threads"] = threads
+                if devices:
+                    jf2 = jflex.batched(f, fuse=False, devices=devices)
+                    d2 = float(np.abs(np.asarray(jax.block_until_ready(jf2(q, qd, qdd, tau))) - pres).max() / np.abs(pres).max())
+                    if not d2 < 1e-9:
+                        raise SystemExit(f"{name}: jflex on {len(devices)} devices differs from Pinocchio's {par} by {d2:.1e}")
+                    row["jflex_devices"] = len(devices)
+                    row["jflex_devices_us"] = 1e6 * best_time(lambda: jax.block_until_ready(jf2(q, qd, qdd, tau))) / N
+                    row["ratio_pin_parallel_over_jflex_devices"] = row["pinocchio_parallel_us"] / row["jflex_devices_us"]
             row["ratio_pin_over_jflex"] = row["pinocchio_loop_us"] / row["jflex_us"]
             row["ratio_pin_parallel_over_jflex"] = (row["pinocchio_parallel_us"] / row["jflex_us"]
                                                     if row["pinocchio_parallel_us"] else None)
@@ -373,7 +393,10 @@ def bench_derivatives(robot, model, batches, algorithms, threads=2):
             fmt = lambda v, f: "-" if v is None else f.format(v)
             print(f"{N:>7} {name:<17} jflex {row['jflex_us']:8.3f} us  pin loop {row['pinocchio_loop_us']:8.3f} us "
                   f"(x{row['ratio_pin_over_jflex']:.2f})  pin {threads}-thread batch {fmt(row['pinocchio_parallel_us'], '{:8.3f}')} us "
-                  f"(x{fmt(row['ratio_pin_parallel_over_jflex'], '{:.2f}')})  compile {compile_s:.1f} s  max rel diff {diff:.1e}",
+                  f"(x{fmt(row['ratio_pin_parallel_over_jflex'], '{:.2f}')})  compile {compile_s:.1f} s  max rel diff {diff:.1e}"
+                  + (f"  | jflex on {row['jflex_devices']} CPU devices {row['jflex_devices_us']:8.3f} us "
+                     f"(pin {threads}-thread batch / jflex x{row['ratio_pin_parallel_over_jflex_devices']:.2f})"
+                     if "jflex_devices_us" in row else ""),
                   flush=True)
     return rows
 

@@ -43,7 +43,7 @@ def _tune_allocator_once():
         tune_allocator()
 
 
-def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True):
+def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True, devices=None):
     """A jitted batch version of a per-item ``fn``: evaluates it over the leading axis of its
     arguments in blocks of ``batch_size`` (``lax.map``), so the working set of each block stays
     in cache however large the batch.
@@ -54,19 +54,46 @@ def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True):
     the default ``True`` for anything else: on jax 0.10.2, XLA:CPU without fusion also returned
     wrong results for other programs (lax.map blocks; a modal linearisation's mass matrix).
 
+    ``devices``: split the batch evenly over these devices (``shard_map``; a batch that does not
+    divide is padded with its last item, and the padding dropped). XLA:CPU runs one such program
+    on one core; to use several cores, start Python with
+    ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` (before JAX is imported) and
+    pass ``jax.devices()``.
+
     Like :func:`sweep`, it calls :func:`jflex.tune_allocator` (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
     """
     _tune_allocator_once()
-    if not fuse and jax.default_backend() == "cpu":
+    cpu_unfused = not fuse and jax.default_backend() == "cpu"
+    options = {"xla_disable_hlo_passes": "fusion"} if cpu_unfused else None
+    if cpu_unfused:
         # one vmapped program, no lax.map blocks: XLA:CPU (jax 0.10.2) miscompiles lax.map's loop
         # body when fusion is off (RNEA and ABA came out wrong by O(1); crba did not), which
         # tests/test_sweep_cli.py checks against the fused program
-        return jax.jit(jax.vmap(fn), compiler_options={"xla_disable_hlo_passes": "fusion"})
+        run = jax.vmap(fn)
+    else:
 
-    def run(*args):
-        return jax.lax.map(lambda a: fn(*a), args, batch_size=batch_size)
+        def run(*args):
+            return jax.lax.map(lambda a: fn(*a), args, batch_size=batch_size)
 
-    return jax.jit(run)
+    devices = list(devices) if devices is not None else []
+    if len(devices) <= 1:
+        return jax.jit(run, compiler_options=options)
+    nd = len(devices)
+    spec = PartitionSpec("batch")
+    sharded = jax.jit(jax.shard_map(run, mesh=Mesh(np.array(devices), ("batch",)), in_specs=spec, out_specs=spec,
+                                    # (eqx.error_if checks inside fn: their cond branches carry no axis type)
+                                    check_vma=False),
+                      compiler_options=options)
+
+    def split(*args):
+        N = jax.tree_util.tree_leaves(args)[0].shape[0]
+        pad = -N % nd
+        if pad:
+            args = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]), args)
+        out = sharded(*args)
+        return jax.tree_util.tree_map(lambda a: a[:N], out) if pad else out
+
+    return split
 
 
 def sweep(

@@ -38,6 +38,31 @@ def test_sweep_shards_over_four_host_devices(tmp_path):
     assert (tmp_path / "chunk_000000000.npz").exists()
 
 
+def test_batched_splits_over_two_host_devices():
+    """``batched(devices=...)`` (how a batch uses two cores on CPU) gives the one-device results,
+    fused and unfused, on a batch that does not divide evenly."""
+    code = textwrap.dedent(
+        """
+        import jax, numpy as np, jflex
+        assert len(jax.devices()) == 2, jax.devices()
+        r = jflex.load_robot("staubli_tx200")
+        r = r.replace(inertia=np.tile([5.0, 0.5, 0.1, 0.2, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0], (3, 1)))
+        rng = np.random.default_rng(0)
+        q, v, t = (rng.normal(size=(1001, r.nq)) for _ in range(3))
+        f = lambda q, v, t: jflex.aba(r, q, v, t)
+        ref = np.asarray(jflex.batched(f)(q, v, t))
+        for fuse in (True, False):
+            out = jflex.batched(f, batch_size=128, fuse=fuse, devices=jax.devices())(q, v, t)
+            assert out.shape == ref.shape and len(out.sharding.device_set) == 2, out.sharding
+            assert np.abs(np.asarray(out) - ref).max() < 1e-9 * np.abs(ref).max()
+        print("OK")
+        """
+    )
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
 def test_sweep_resumes_from_saved_chunks(tmp_path):
     calls = []
 
