@@ -9,6 +9,7 @@ import pytest
 
 import jflex
 from _references import pin, random_inertia_params
+from jflex._dynamics import _rnea
 
 RTOL = 1e-9
 
@@ -75,13 +76,35 @@ def test_derivatives_match_forward_mode_ad(seed):
     q, qd, qdd = rng.normal(size=(3, n))
     fext = rng.normal(size=(n, 6))
     for f in (None, fext):
-        ad = jax.jacfwd(lambda *x: jflex.rnea(robot, *x, f_ext=f), argnums=(0, 1, 2))(q, qd, qdd)
+        # forward mode through the traversal (the public rnea's own JVP is the analytic kernel)
+        ad = jax.jacfwd(lambda *x: _rnea(robot, *x, f, "rnea"), argnums=(0, 1, 2))(q, qd, qdd)
         for a, b in zip(jflex.rnea_derivatives(robot, q, qd, qdd, f_ext=f), ad):
             close(a, b)
         tau = rng.normal(size=n)
         ad = jax.jacfwd(lambda *x: jflex.aba(robot, *x, f_ext=f), argnums=(0, 1, 2))(q, qd, tau)
         for a, b in zip(jflex.aba_derivatives(robot, q, qd, tau, f_ext=f), ad):
             close(a, b)
+
+
+def test_rnea_custom_jvp_equals_forward_mode_through_the_traversal():
+    """jflex.rnea's analytic JVP gives what plain AD through the traversal gives, in every mode
+    (jvp, jacfwd, jacrev, second order) and for tangents it hands back to plain forward mode
+    (the robot's inertial parameters, external wrenches)."""
+    robot, rng = _dh_robot(5)
+    n = robot.nq
+    x = tuple(rng.normal(size=(3, n)))
+    fext = rng.normal(size=(n, 6))
+    ours = lambda *a: jflex.rnea(robot, *a)
+    plain = lambda *a: _rnea(robot, *a, None, "rnea")
+    t = tuple(rng.normal(size=(3, n)))
+    close(jax.jvp(ours, x, t)[1], jax.jvp(plain, x, t)[1])
+    for mode in (jax.jacfwd, jax.jacrev):
+        for a, b in zip(mode(ours, argnums=(0, 1, 2))(*x), jax.jacfwd(plain, argnums=(0, 1, 2))(*x)):
+            close(a, b)
+    close(jax.hessian(lambda q: ours(q, *x[1:]) @ x[2])(x[0]), jax.hessian(lambda q: plain(q, *x[1:]) @ x[2])(x[0]), 1e-8)
+    by_inertia = lambda fn: jax.jacfwd(lambda I: fn(robot.replace(inertia=I), *x))(robot.inertia)
+    close(by_inertia(jflex.rnea), by_inertia(lambda r, *a: _rnea(r, *a, None, "rnea")))
+    close(jax.jacfwd(lambda f: jflex.rnea(robot, *x, f_ext=f))(fext), jax.jacfwd(lambda f: _rnea(robot, *x, f, "rnea"))(fext))
 
 
 def test_compiled_batch_matches_single_states():

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._dynamics import rnea
+from .._dynamics import _rnea
 from ..identify._signal import motion_band, zero_phase_lowpass
 from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
 from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, predict
@@ -107,7 +107,9 @@ class LawTerm(TorqueTerm):
 # --- a joint's compliance, seen in torque data -----------------------------------------------------
 @jax.jit
 def _jvp_batch(robot, q, qd, qdd, dq, dqd, dqdd):
-    f = lambda a, b, c: rnea(robot, a, b, c)
+    # one direction per sample: forward mode through the traversal (the public rnea's analytic
+    # derivative builds every direction's matrices, and compiles longer)
+    f = lambda a, b, c: _rnea(robot, a, b, c, None, "rnea")
     return jax.vmap(lambda *x: jax.jvp(f, x[:3], x[3:])[1])(q, qd, qdd, dq, dqd, dqdd)
 
 
