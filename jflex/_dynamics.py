@@ -15,7 +15,7 @@ import numpy as np
 from . import _scalar as s
 from . import _spatial as sp
 from ._checks import checked_arrays as _checked, guard, has_inertia, moving_inertia
-from ._derivatives import _kernel, _matrix
+from ._derivatives import _kernel, _matrix, aba_derivatives
 from ._errors import ParameterError
 from ._robot import PRISMATIC, Robot
 from ._tree import accumulate, consts, host, motion, support, walk
@@ -317,13 +317,45 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
 
     Raises :class:`jflex.DataError` for NaN/inf arguments and :class:`jflex.ParameterError` when a
     joint moves no inertia (the mass matrix is singular), naming the joint; inside ``jit`` with the
-    robot traced both are run-time errors with the same messages."""
-    return _aba(robot, q, qd, tau, f_ext, "aba")
+    robot traced both are run-time errors with the same messages.
+
+    Forward-mode derivatives in ``q``, ``qd``, ``tau`` come from :func:`jflex.aba_derivatives` (a
+    custom JVP, as :func:`rnea`'s)."""
+    moving_inertia("aba", robot)
+    q, qd, tau, f_ext = _checked("aba", robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
+    return _aba_jvp(robot, q, qd, tau, f_ext)
+
+
+@jax.custom_jvp
+def _aba_jvp(robot, q, qd, tau, f_ext):
+    """:func:`_aba_core` with the analytic forward-mode derivative (see :func:`_rnea_jvp`)."""
+    return _aba_core(robot, q, qd, tau, f_ext, "aba")
+
+
+def _aba_tangent(primals, tangents):
+    robot, q, qd, tau, f_ext = primals
+    zero = lambda t: isinstance(t, jax.custom_derivatives.SymbolicZero)
+    if not all(zero(t) for t in jax.tree_util.tree_leaves(tangents[0::4], is_leaf=zero)):
+        dense = [jax.tree_util.tree_map(_instantiate, p, t, is_leaf=zero) for p, t in zip(primals, tangents)]
+        return jax.jvp(lambda *a: _aba_core(*a, "aba"), primals, tuple(dense))
+    qdd = _aba_core(robot, q, qd, tau, f_ext, "aba")
+    out = jnp.zeros_like(qdd)
+    for mat, t in zip(aba_derivatives(robot, q, qd, tau, f_ext), tangents[1:4]):
+        if not zero(t):
+            out = out + mat @ t
+    return qdd, out
+
+
+_aba_jvp.defjvp(_aba_tangent, symbolic_zeros=True)
 
 
 def _aba(robot: Robot, q, qd, tau, f_ext, fn):
     moving_inertia(fn, robot)
     q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
+    return _aba_core(robot, q, qd, tau, f_ext, fn)
+
+
+def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
     n = robot.nq
     c = consts(robot)
     ls = walk(robot, c, q, qd)

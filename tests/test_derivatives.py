@@ -9,7 +9,7 @@ import pytest
 
 import jflex
 from _references import pin, random_inertia_params
-from jflex._dynamics import _rnea
+from jflex._dynamics import _aba, _rnea
 
 RTOL = 1e-9
 
@@ -86,8 +86,8 @@ def test_derivatives_match_forward_mode_ad(seed):
             close(a, b)
 
 
-def test_rnea_custom_jvp_equals_forward_mode_through_the_traversal():
-    """jflex.rnea's analytic JVP gives what plain AD through the traversal gives, in every mode
+def test_custom_jvps_equal_forward_mode_through_the_traversal():
+    """jflex.rnea's and jflex.aba's analytic JVPs give what plain AD through the traversal gives, in every mode
     (jvp, jacfwd, jacrev, second order) and for tangents it hands back to plain forward mode
     (the robot's inertial parameters, external wrenches)."""
     robot, rng = _dh_robot(5)
@@ -105,6 +105,14 @@ def test_rnea_custom_jvp_equals_forward_mode_through_the_traversal():
     by_inertia = lambda fn: jax.jacfwd(lambda I: fn(robot.replace(inertia=I), *x))(robot.inertia)
     close(by_inertia(jflex.rnea), by_inertia(lambda r, *a: _rnea(r, *a, None, "rnea")))
     close(jax.jacfwd(lambda f: jflex.rnea(robot, *x, f_ext=f))(fext), jax.jacfwd(lambda f: _rnea(robot, *x, f, "rnea"))(fext))
+    # aba likewise (its JVP: aba_derivatives)
+    ours = lambda *a: jflex.aba(robot, *a)
+    plain = lambda *a: _aba(robot, *a, None, "aba")
+    close(jax.jvp(ours, x, t)[1], jax.jvp(plain, x, t)[1], 1e-8)
+    for mode in (jax.jacfwd, jax.jacrev):
+        for a, b in zip(mode(ours, argnums=(0, 1, 2))(*x), jax.jacfwd(plain, argnums=(0, 1, 2))(*x)):
+            close(a, b, 1e-8)
+    close(by_inertia(jflex.aba), by_inertia(lambda r, *a: _aba(r, *a, None, "aba")), 1e-8)
 
 
 def test_compiled_batch_matches_single_states():
