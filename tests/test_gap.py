@@ -45,6 +45,12 @@ def test_planted_effect_found_and_parameter_recovered(rotor_case):
     # the nominal identification already takes up the part of Ia that link 1's CAD tolerance
     # allows (Ia of a vertical first joint adds to link 1's Izz): the shrink is of what is left
     assert r["shrink"] > 70 and r["gap_after"] < 1.7 * r["noise_floor"]
+    # which candidates are a change of the refitted inertias on these motions (Khalil's regrouping:
+    # arm3's joint 1 is vertical and joint 2 perpendicular to it, so their rotors add to their links'
+    # Izz; joint 3 is parallel to joint 2, whose motion also turns link 3: its rotor stays apart; a
+    # payload is the last link's parameters)
+    conf = {(h["effect"], h["joint"]) for h in r["confounded_with_inertia_refit"]}
+    assert conf == {("rotor_inertia", "joint1"), ("rotor_inertia", "joint2"), ("payload", None)}
     for key in ("gap_before", "gap_after", "noise_floor", "significant", "where", "ranking", "selected"):
         assert key in r
     assert r["where"][0]["dataset"] == "traj2" and r["where"][0]["nrmse"] >= r["where"][-1]["nrmse"]

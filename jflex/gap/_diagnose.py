@@ -28,7 +28,7 @@ from ._problem import CONFOUNDED, SIMULATED_EFFECTS, Candidate, Problem, State, 
 from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
                          decisive, is_significant, rank_entries, step_record, stop_reason, verdict)
 from ._frequency_kinds import frequency_kinds
-from ._signatures import n_params, signature_name, signatures
+from ._signatures import indistinguishable_from_inertia, n_params, signature_name, signatures
 from ._where import where
 
 @dataclasses.dataclass
@@ -88,6 +88,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     floor = noise_floor(pb, ev0, case, floor_source)
     cands = pb.candidates()
     sig = signatures(pb, nom, cands)
+    held = indistinguishable_from_inertia(pb, cands)
     tc = sorted([c for c in cands if c in sig], key=lambda c: -sig[c])
     keep = tc[:prune] + [c for c in cands if c not in sig]
     failed = _failed_solves("nominal", ev0)
@@ -204,6 +205,10 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         gap_before=gap0, gap_after=gap_after, noise_floor=fl,
         noise_floor_per_dataset=floor, noise_floor_source=floor_source, excess_before=exc0, excess_after=exc_after,
         shrink=shrink_total, inertia_refit=moves, inertia=inertia_note,
+        # candidates whose torques are a change of the refitted inertias on these motions: the refit's
+        # tolerance, not the data, splits them from a CAD error
+        confounded_with_inertia_refit=[dict(effect=c.effect, joint=None if c.joint is None else pb.names[c.joint],
+                                    relative_residual=float(v)) for c, v in held.items()],
 
         processing={s_.name: s_.processing for s_ in pb.ttrain + pb.tval if s_.processing},
         significant=bool(significant), remaining_significant=bool(is_significant(ev_cur, floor)),

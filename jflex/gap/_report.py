@@ -206,6 +206,14 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
             L.append(f"| {s['effect']} | {s['joint'] or s.get('link') or '-'} | {s['gap_after']:.2f} | {s['shrink']:.0f} | {s['score']:.1f} |")
     else:
         L.append("None: " + ("the gap is within the noise floor." if not r["significant"] else "no candidate closed enough of the gap on held-out data."))
+    if r.get("confounded_with_inertia_refit"):
+        L += ["", "## Confounded with the inertial refit", "",
+              "On these motions these candidates are the same torques as a change of the links' inertial "
+              "parameters (their columns lie in the span of the refitted ones: a rotor's inertia regroups with "
+              "its link's, a payload is the last link's). The refit holds them as far as the CAD tolerance lets it, "
+              "and only what lies beyond that tolerance can be named; holding the inertias fixed "
+              "(`options.refit_inertia: false`, when the CAD is trusted) gives the data to the candidates:", ""]
+        L += [f"- {h['effect']}" + (f" at {h['joint']}" if h["joint"] else "") for h in r["confounded_with_inertia_refit"]]
     if r["ambiguous"]:
         L += ["", "## Ambiguous", ""]
         for a in r["ambiguous"]:

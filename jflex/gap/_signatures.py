@@ -52,3 +52,44 @@ def signature_name(effect: str) -> str:
     """What a candidate's residual looks like: its kind says it (the torque side's first)."""
     kind = KINDS.get(effect) or frequency_kinds().get(effect)
     return kind.signature if kind is not None else ""
+
+
+INDISTINGUISHABLE = 1e-6  # relative residual of a candidate's columns off the inertial columns' span
+
+
+def indistinguishable_from_inertia(problem: Problem, cands) -> dict:
+    """Torque candidates whose columns lie in the span of the inertial parameters the nominal
+    identification refits (``{candidate: relative residual}``): on these motions they are the same
+    torques as a change of the links' inertias (a rotor's inertia regroups with its link's about
+    the joint axis, a payload is the last link's parameters), so the refit holds them up to the
+    CAD tolerance, and only what lies beyond it can show as a gap. Empty when the nominal
+    identification keeps the CAD inertias."""
+    if not problem.ttrain or problem.inertia is None:
+        return {}
+    sets = []
+    for st in problem.ttrain:
+        w = 1.0 / st.scale
+        Yw = (T._filtered(st, "Y") * w[None, :, None]).reshape(st.tau.size, -1)
+        sets.append((st, w, Yw))
+    YtY = sum(Yw.T @ Yw for _, _, Yw in sets)
+    d = np.sqrt(np.maximum(np.diag(YtY), 1e-300))
+    pinv = np.linalg.pinv(YtY / d[:, None] / d[None, :], rcond=1e-12)
+    out = {}
+    for c in cands:
+        if c.effect not in KINDS or c in problem.user:
+            continue
+        term = make_term(c.effect, c.joint)
+        if not term.n_params:
+            continue
+        YtA = AtA = 0.0
+        for st, w, Yw in sets:
+            A = (T.term_columns(term, st) * w[None, :, None]).reshape(st.tau.size, -1)
+            YtA, AtA = YtA + Yw.T @ A, AtA + A.T @ A
+        total = float(np.trace(AtA))
+        if total <= 0:
+            continue
+        Ys = YtA / d[:, None]
+        rel = max(total - float(np.trace(Ys.T @ pinv @ Ys)), 0.0) / total
+        if rel < INDISTINGUISHABLE:
+            out[c] = rel
+    return out
