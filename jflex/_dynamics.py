@@ -156,20 +156,24 @@ def _rnea_jvp(robot, q, qd, qdd, f_ext):
     return _rnea_core(robot, q, qd, qdd, f_ext)
 
 
-def _rnea_tangent(primals, tangents):
-    robot, q, qd, qdd, f_ext = primals
-    zero = lambda t: isinstance(t, jax.custom_derivatives.SymbolicZero)
-    if not all(zero(t) for t in jax.tree_util.tree_leaves(tangents[0::4], is_leaf=zero)):
-        dense = [jax.tree_util.tree_map(_instantiate, p, t, is_leaf=zero) for p, t in zip(primals, tangents)]
-        return jax.jvp(_rnea_core, primals, tuple(dense))
-    dq, dv, M, _, _ = _kernel(robot, q, qd, qdd, f_ext)
-    tau = _rnea_core(robot, q, qd, qdd, f_ext)
-    dt = tau.dtype
-    out = jnp.zeros_like(tau)
-    for mat, t in ((dq, tangents[1]), (dv, tangents[2]), (M, tangents[3])):
-        if not zero(t):
-            out = out + _matrix(mat, dt) @ t
-    return tau, out
+def _state_jvp(core, matrices):
+    """A JVP rule for ``core(robot, x1, x2, x3, f_ext)``: ``sum_k matrices(...)[k] @ dx_k`` when
+    only the state ``x1, x2, x3`` carries tangents; plain forward mode through ``core`` when the
+    robot's parameters or ``f_ext`` do."""
+
+    def rule(primals, tangents):
+        zero = lambda t: isinstance(t, jax.custom_derivatives.SymbolicZero)
+        if not all(zero(t) for t in jax.tree_util.tree_leaves(tangents[0::4], is_leaf=zero)):
+            dense = [jax.tree_util.tree_map(_instantiate, p, t, is_leaf=zero) for p, t in zip(primals, tangents)]
+            return jax.jvp(core, primals, tuple(dense))
+        y = core(*primals)
+        out = jnp.zeros_like(y)
+        for mat, t in zip(matrices(*primals), tangents[1:4]):
+            if not zero(t):
+                out = out + mat @ t
+        return y, out
+
+    return rule
 
 
 def _instantiate(p, t):
@@ -179,7 +183,12 @@ def _instantiate(p, t):
     return jnp.zeros_like(p) if jnp.issubdtype(p.dtype, jnp.inexact) else np.zeros(p.shape, jax.dtypes.float0)
 
 
-_rnea_jvp.defjvp(_rnea_tangent, symbolic_zeros=True)
+def _rnea_matrices(robot, q, qd, qdd, f_ext):
+    dq, dv, M, _, _ = _kernel(robot, q, qd, qdd, f_ext)
+    return tuple(_matrix(m, _dtype()) for m in (dq, dv, M))
+
+
+_rnea_jvp.defjvp(_state_jvp(lambda *a: _rnea_core(*a), _rnea_matrices), symbolic_zeros=True)
 
 
 def _rnea_core(robot: Robot, q, qd, qdd, f_ext):
@@ -332,21 +341,7 @@ def _aba_jvp(robot, q, qd, tau, f_ext):
     return _aba_core(robot, q, qd, tau, f_ext, "aba")
 
 
-def _aba_tangent(primals, tangents):
-    robot, q, qd, tau, f_ext = primals
-    zero = lambda t: isinstance(t, jax.custom_derivatives.SymbolicZero)
-    if not all(zero(t) for t in jax.tree_util.tree_leaves(tangents[0::4], is_leaf=zero)):
-        dense = [jax.tree_util.tree_map(_instantiate, p, t, is_leaf=zero) for p, t in zip(primals, tangents)]
-        return jax.jvp(lambda *a: _aba_core(*a, "aba"), primals, tuple(dense))
-    qdd = _aba_core(robot, q, qd, tau, f_ext, "aba")
-    out = jnp.zeros_like(qdd)
-    for mat, t in zip(aba_derivatives(robot, q, qd, tau, f_ext), tangents[1:4]):
-        if not zero(t):
-            out = out + mat @ t
-    return qdd, out
-
-
-_aba_jvp.defjvp(_aba_tangent, symbolic_zeros=True)
+_aba_jvp.defjvp(_state_jvp(lambda *a: _aba_core(*a, "aba"), aba_derivatives), symbolic_zeros=True)
 
 
 def _aba(robot: Robot, q, qd, tau, f_ext, fn):
