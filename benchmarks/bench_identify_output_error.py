@@ -14,12 +14,14 @@ Both fitters minimise the SAME residual (``ClosedLoopData.residuals``: the plain
 ``jflex.simulate``; joint angles scaled per joint as ``jflex.identify.TimeData`` does), from the
 SAME start (psi of the CAD model and catalogue friction), with the same stopping tolerance:
 
-- jflex: ``jflex.identify.fit`` with ``jflex.identify.levenberg_marquardt`` and the residual's exact
+- jflex: ``jflex.identify.fit`` with ``optx.GaussNewton`` (``--solvers gn``, default; ``lm``:
+  ``jflex.identify.levenberg_marquardt``, which took 29-30 steps here against 6) and the residual's exact
   Jacobian from FORWARD SENSITIVITY EQUATIONS integrated alongside the motion in one
   ``jflex.simulate`` call (the sensitivities are internal states ``z`` of the same effect):
-  ``M S'' + (dtau/dq + Kp) S + (dtau/dqd + Kd) S' = -Y(q, qd, qdd) K^+`` with the analytic RNEA
-  derivatives (``jflex.rnea_derivatives``) and the identification regressor
-  (``jflex.identify.Regressor``), since the dynamics are linear in the parameters. The residual
+  ``M S'' + (dtau/dq + Kp) S + (dtau/dqd + Kd) S' = -Y(q, qd, qdd) K^+``: the state terms as one
+  ``jax.jvp`` of ``jflex.rnea`` (+ friction - control) per column of S, batched, and the parameter
+  terms from the identification regressor (``jflex.identify.Regressor``), since the dynamics are
+  linear in the parameters (``jflex.rnea_derivatives`` in their place was slower in the solve's loop). The residual
   carries it as a ``jax.custom_jvp``, so ``fit``'s ``jax.jacfwd`` gets it in one solve.
 - scipy: ``scipy.optimize.least_squares`` (``--scipy-methods``: MINPACK ``lm`` and/or ``trf``) with
   finite-difference Jacobians calling the same jitted residual; one row per ``--diff-step``
@@ -46,7 +48,7 @@ Counting: a jflex step is one trial point evaluated with its Jacobian (one sensi
 Times: best of ``--repeat``; compilation excluded and printed separately. Final costs are
 recomputed with the same jitted residual for every row.
 
-    python benchmarks/bench_identify_output_error.py [--seconds 5] [--samples 500] [--max-iter 30]
+    python benchmarks/bench_identify_output_error.py [--seconds 5] [--samples 500] [--max-iter 40] [--solvers gn lm]
         [--repeat 1] [--tol 1e-8] [--jac-rtol same 1e-6] [--diff-step 1e-4] [--scipy-methods lm] [--segments 1]
         [--ad-jacobian] [--quick]
 
@@ -64,6 +66,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 import scipy.optimize
 
 import jflex
@@ -330,7 +333,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0, help="record length [s]")
     ap.add_argument("--samples", type=int, default=500, help="samples of the record (6 joint angles each)")
-    ap.add_argument("--max-iter", type=int, default=30, help="jflex LM steps; scipy max_nfev = this x 3 trial points")
+    ap.add_argument("--max-iter", type=int, default=40, help="jflex LM steps; scipy max_nfev = this x 3 trial points")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--tol", type=float, default=1e-8, help="jflex LM rtol = atol; scipy xtol = ftol = gtol")
     ap.add_argument("--rtol", type=float, default=1e-8, help="ODE rtol of the fit's solves")
@@ -346,6 +349,8 @@ def main(argv=None):
     ap.add_argument("--jac-rtol", nargs="+", default=["same", "1e-6"],
                     help="jflex rows: 'same' (residual and Jacobian from one sensitivity solve at --rtol) or an rtol for a "
                          "separate, looser sensitivity solve (the residual then from the plain solve at --rtol)")
+    ap.add_argument("--solvers", nargs="+", default=["gn"], choices=["gn", "lm"],
+                    help="jflex solvers: optimistix Gauss-Newton, jflex.identify.levenberg_marquardt")
     ap.add_argument("--scipy-methods", nargs="+", default=["lm"], choices=["lm", "trf"])
     ap.add_argument("--ad-jacobian", action="store_true", help="also time one plain forward-mode AD Jacobian (slow)")
     ap.add_argument("--quick", action="store_true", help="smoke run: 1 s record, 100 samples, 8 steps")
@@ -394,15 +399,18 @@ def main(argv=None):
         print(f"[progress] plain forward-mode AD Jacobian {t_ad:.2f} s (compile {ad[0]:.1f} s)", flush=True)
 
     # --- jflex: LM, exact sensitivity Jacobians ------------------------------------------------------
-    solver = idf.levenberg_marquardt(a.tol, a.tol)
+    solvers = {"lm": ("LM", lambda: idf.levenberg_marquardt(a.tol, a.tol)),
+               "gn": ("Gauss-Newton", lambda: optx.GaussNewton(rtol=a.tol, atol=a.tol))}
     jrows = []
-    for jr in a.jac_rtol:
+    for sk, jr in [(sk, jr) for sk in a.solvers for jr in a.jac_rtol]:
+        sname, make = solvers[sk]
+        solver = make()
         same = jr.lower() == "same"
         dj = data if same else dataclasses.replace(data, jacobian_kw=(("atol", float(jr) * a.atol / a.rtol), ("rtol", float(jr))))
         runs = [_jflex_fit(start, spec, dj, solver, a.max_iter) for _ in range(a.repeat)]
         res, t_j, comp_j, eval_j = min(runs, key=lambda x: x[1])
-        label = ("jflex LM, sensitivity Jacobian (same solve)" if same else
-                 f"jflex LM, sensitivity Jacobian at rtol {float(jr):g} + residual solve")
+        label = (f"jflex {sname}, sensitivity Jacobian (same solve)" if same else
+                 f"jflex {sname}, sensitivity Jacobian at rtol {float(jr):g} + residual solve")
         jrows.append(dict(label=label, t=t_j, comp=comp_j, eval=eval_j, res=res, u=np.asarray(res.u), cost=cost(res.u)))
         print(f"[progress] {label}: {t_j:.2f} s, {res.steps} steps, {res.result}, {1e3 * eval_j:.0f} ms per r+J", flush=True)
 
@@ -464,6 +472,10 @@ def main(argv=None):
           + ", ".join(f"{1e3 * j['eval']:.0f} ms per r+J ({j['eval'] / t_r:.1f}x)" for j in jrows)
           + f"; compile: residual {comp_r:.1f} s, sensitivity solve {comp_rj:.1f} s, jflex fits "
           + ", ".join(f"{j['comp']:.1f} s" for j in jrows))
+    for j in jrows:
+        h = np.asarray(j["res"].history)
+        print(f"{j['label']}: cost per step " + " ".join(f"{c:.6g}" for c in h)
+              + f"; first within 1e-6 of its final cost at step {int(np.argmax(h <= j['cost'] * (1 + 1e-6)))}")
     if ad is not None:
         print(f"plain forward-mode AD Jacobian through jflex.simulate (jax.jacfwd, {p} tangents): {ad[1]:.2f} s "
               f"({ad[1] / t_r:.0f}x the residual), compile {ad[0]:.1f} s; max rel. diff to the sensitivity Jacobian {ad[2]:.1e}")
