@@ -90,7 +90,7 @@ def test_custom_jvps_equal_forward_mode_through_the_traversal():
     """jflex.rnea's and jflex.aba's analytic JVPs give what plain AD through the traversal gives, in every mode
     (jvp, jacfwd, jacrev, second order) and for tangents it hands back to plain forward mode
     (the robot's inertial parameters, external wrenches)."""
-    robot, rng = _dh_robot(5)
+    robot, rng = _dh_robot(5, n=3)
     n = robot.nq
     x = tuple(rng.normal(size=(3, n)))
     fext = rng.normal(size=(n, 6))

@@ -1,6 +1,8 @@
 """Rigid-body algorithms against Pinocchio (float64, 1e-9 relative) on the UR5 and Panda URDFs of
 example-robot-data and on random robots (hypothesis)."""
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -98,17 +100,27 @@ def test_random_dh_robots_match_pinocchio(seed, n, standard):
             close(jflex.frame_placement(robot, q, f"dh{i + 1}"), frames[i])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fuse", [True, False])
 def test_batched_kernels_match_pinocchio(fuse):
     # the batch path the benchmarks time: blocks (fuse=True) or one unfused program (fuse=False,
-    # where XLA:CPU once miscompiled lax.map blocks and RNEA/ABA came out wrong by O(1))
-    if "panda" not in jflex.available_robots():
-        pytest.skip("example-robot-data not installed")
-    from jflex._config import _example_robot_urdf
+    # where XLA:CPU once miscompiled lax.map blocks and RNEA/ABA came out wrong by O(1)); the
+    # benchmarks' Panda at full size (JFLEX_SLOW=1), else a random 4-joint DH arm (the Panda's
+    # six batched programs compile for minutes on 2 cores, a UR5's for over one)
+    if os.environ.get("JFLEX_SLOW") == "1":
+        if "panda" not in jflex.available_robots():
+            pytest.skip("example-robot-data not installed")
+        from jflex._config import _example_robot_urdf
 
-    path = str(_example_robot_urdf("panda"))
-    robot = jflex.load_urdf(path, mimic="independent")  # the Panda's fingers, as Pinocchio loads them
-    model = pin.buildModelFromUrdf(path)
+        path = str(_example_robot_urdf("panda"))
+        robot = jflex.load_urdf(path, mimic="independent")  # the Panda's fingers, as Pinocchio loads them
+        model = pin.buildModelFromUrdf(path)
+    else:
+        g = np.random.default_rng(7)
+        table = np.column_stack([g.uniform(-np.pi, np.pi, 4), g.uniform(-1, 1, 4), g.uniform(-1, 1, 4), g.uniform(-np.pi, np.pi, 4)])
+        robot = jflex.from_dh(table, joint_types=["revolute", "prismatic", "revolute", "revolute"],
+                              inertias=[random_inertia_params(g) for _ in range(4)], gravity=[0.0, 0.0, -9.81])
+        model = pin_model_from_robot(robot)
     data = model.createData()
     rng = np.random.default_rng(3)
     N = 300  # > batch_size: several blocks and a ragged last one

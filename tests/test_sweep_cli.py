@@ -49,7 +49,7 @@ def test_batched_splits_over_two_host_devices():
         r = r.replace(inertia=np.tile([5.0, 0.5, 0.1, 0.2, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0], (3, 1)))
         rng = np.random.default_rng(0)
         q, v, t = (rng.normal(size=(1001, r.nq)) for _ in range(3))
-        f = lambda q, v, t: jflex.aba(r, q, v, t)
+        f = lambda q, v, t: jflex.rnea(r, q, v, t)
         ref = np.asarray(jflex.batched(f)(q, v, t))
         for fuse in (True, False):
             out = jflex.batched(f, batch_size=128, fuse=fuse, devices=jax.devices())(q, v, t)
