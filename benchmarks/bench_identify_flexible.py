@@ -52,6 +52,7 @@ import time
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 import scipy.optimize
@@ -209,6 +210,12 @@ SOLVERS = {"jflex-lm": ("jflex LM (expand 0.75)", lambda tol: idf.levenberg_marq
            "optx-gn-armijo": ("optimistix Gauss-Newton + Armijo backtracking",
                               lambda tol: eqx.tree_at(lambda s: s.search, optx.GaussNewton(rtol=tol, atol=tol),
                                                       optx.BacktrackingArmijo())),
+           # the same, its Gauss-Newton step from the normal equations (Cholesky of J^T J, 18 x 18) instead
+           # of lineax's default QR of the (m, 18) Jacobian
+           "optx-gn-armijo-normal": ("optimistix Gauss-Newton + Armijo, normal equations",
+                                     lambda tol: eqx.tree_at(lambda s: s.search, optx.GaussNewton(
+                                         rtol=tol, atol=tol, linear_solver=lx.Normal(lx.Cholesky())),
+                                         optx.BacktrackingArmijo())),
            "optx-indirect-lm": ("optimistix indirect LM", lambda tol: optx.IndirectLevenbergMarquardt(rtol=tol, atol=tol)),
            "optx-dogleg": ("optimistix Dogleg", lambda tol: optx.Dogleg(rtol=tol, atol=tol))}
 JACS = {"fwd": "jax.jacfwd through jflex.frf's JVP", "bwd": "jax.jacrev", "structured": "structured exact JVP"}
