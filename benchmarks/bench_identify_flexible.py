@@ -35,8 +35,12 @@ evals" for scipy counts calls of the residual (trial points + 18 per FD Jacobian
 ``--repeat``; compilation excluded and printed.
 
     python benchmarks/bench_identify_flexible.py [--postures 20] [--freqs 120] [--repeat 3] [--tol 1e-10]
-        [--noise 0.01] [--rows optx-gn/structured optx-gn/fwd jflex-lm/structured scipy-trf scipy-lm]
+        [--noise 0.01] [--start-offset 0.5] [--rows optx-gn-armijo-normal/structured scipy-trf ...]
         [--row-timeout 900]
+
+The issue-14 headline (RESULTS.md): ``--postures 20 --repeat 2 --start-offset 0.2 --rows
+optx-gn-armijo-normal/structured optx-gn-armijo/structured scipy-trf`` (from +/-50 % the solvers
+stop in different local minima, so no equal-cost comparison exists there).
 """
 
 from __future__ import annotations
@@ -343,8 +347,8 @@ def main(argv=None):
     ap.add_argument("--max-steps", type=int, default=200)
     ap.add_argument("--start-offset", type=float, default=0.5,
                     help="start = truth x (1 +/- offset), signs alternating (K and I_m +,-,...; C -,+,...)")
-    ap.add_argument("--rows", nargs="+", default=["optx-gn/structured", "optx-gn/fwd", "jflex-lm/structured",
-                                                   "optx-lm/structured", "scipy-trf", "scipy-lm"],
+    ap.add_argument("--rows", nargs="+", default=["optx-gn-armijo-normal/structured", "optx-gn-armijo/structured",
+                                                   "optx-gn/fwd", "jflex-lm/structured", "scipy-trf"],
                     help="table rows: scipy-lm | scipy-trf | scipy-dogbox (FD Jacobians) or SOLVER/JAC with SOLVER in "
                          f"{list(SOLVERS)} and JAC in {list(JACS)} (the first exact row is the reference of the cost "
                          "differences). optx-dogleg and optx-indirect-lm hung in XLA:CPU's Execute (all threads idle in "
