@@ -8,13 +8,16 @@ joint-space mass matrix, ``regressor`` the matrix Y with ``rnea = Y @ robot.iner
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from . import _scalar as s
 from . import _spatial as sp
-from ._checks import checked_arrays as _checked, guard, has_inertia, moving_inertia
+from ._checks import checked_arrays as _checked
+from ._checks import guard, has_inertia, moving_inertia
 from ._derivatives import _kernel, _matrix, aba_derivatives
 from ._errors import ParameterError
 from ._robot import PRISMATIC, Robot
@@ -124,15 +127,15 @@ def rnea(robot: Robot, q, qd, qdd, f_ext=None):
     **Returns:** (n,) joint torques/forces ``tau = M(q) qdd + C(q, qd) qd + g(q) - J^T f_ext``.
 
     Forward-mode derivatives in ``q``, ``qd``, ``qdd`` (``jax.jvp``, ``jax.jacfwd``) come from the
-    analytic recursion of :func:`jflex.rnea_derivatives` (a custom JVP); in the robot's
-    parameters and ``f_ext``, from plain forward mode.
+    analytic recursion of :func:`jflex.rnea_derivatives` (a custom JVP, for a robot that is not
+    itself traced); in the robot's parameters and ``f_ext``, from plain forward mode.
 
     Raises :class:`jflex.DataError` for NaN/inf arguments (at run time inside ``jit``) and
     :class:`jflex.ParameterError` for a robot without any inertial parameters.
     """
     has_inertia("rnea", robot)
     q, qd, qdd, f_ext = _checked("rnea", robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
-    return _rnea_jvp(robot, q, qd, qdd, f_ext)
+    return (_rnea_analytic if _concrete(robot) else _rnea_core)(robot, q, qd, qdd, f_ext)
 
 
 def _rnea(robot: Robot, q, qd, qdd, f_ext, fn, check=True):
@@ -144,36 +147,39 @@ def _rnea(robot: Robot, q, qd, qdd, f_ext, fn, check=True):
     return _rnea_core(robot, q, qd, qdd, f_ext)
 
 
-@jax.custom_jvp
-def _rnea_jvp(robot, q, qd, qdd, f_ext):
-    """:func:`_rnea_core` whose forward-mode derivative in ``q``, ``qd``, ``qdd`` is the analytic
-    one (:func:`jflex.rnea_derivatives`: one recursive pass for every direction, where forward
-    mode pushes each tangent through the whole traversal: ``jax.jacfwd`` of a Panda's RNEA in
-    ``(q, qd)`` 4.4x faster); tangents in the robot's parameters or the external wrenches take
-    plain forward mode. Only the public :func:`rnea` uses it: reverse mode transposes the full
-    matrices (``jax.grad`` 1.6x slower than through the traversal) and the kernel compiles
-    longer, which the library's own linearisations and fits need not pay."""
-    return _rnea_core(robot, q, qd, qdd, f_ext)
+def _state_derivative(core, matrices):
+    """``core(robot, x1, x2, x3, f_ext)`` whose forward-mode derivative in the state ``x1, x2, x3``
+    is ``sum_k matrices(...)[k] @ dx_k`` (the analytic recursions of :mod:`._derivatives`: one pass
+    for every direction, where forward mode pushes each tangent through the whole traversal);
+    tangents in ``f_ext`` take plain forward mode. The robot is held as a constant of the rule
+    (``nondiff_argnums``): its arrays stay concrete while the kernels are traced, which the
+    unrolled kernels fold (a robot traced as an argument of the rule made the batched RNEA 1.7x
+    slower); so this applies only to a robot that is not traced (see :func:`_concrete`), and
+    derivatives in the robot's parameters take plain forward mode through ``core``."""
 
+    @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+    def f(robot, x1, x2, x3, f_ext):
+        return core(robot, x1, x2, x3, f_ext)
 
-def _state_jvp(core, matrices):
-    """A JVP rule for ``core(robot, x1, x2, x3, f_ext)``: ``sum_k matrices(...)[k] @ dx_k`` when
-    only the state ``x1, x2, x3`` carries tangents; plain forward mode through ``core`` when the
-    robot's parameters or ``f_ext`` do."""
-
-    def rule(primals, tangents):
+    def rule(robot, primals, tangents):
         zero = lambda t: isinstance(t, jax.custom_derivatives.SymbolicZero)
-        if not all(zero(t) for t in jax.tree_util.tree_leaves(tangents[0::4], is_leaf=zero)):
+        if not all(zero(t) for t in jax.tree_util.tree_leaves(tangents[3], is_leaf=zero)):
             dense = [jax.tree_util.tree_map(_instantiate, p, t, is_leaf=zero) for p, t in zip(primals, tangents)]
-            return jax.jvp(core, primals, tuple(dense))
-        y = core(*primals)
+            return jax.jvp(lambda *a: core(robot, *a), primals, tuple(dense))
+        y = core(robot, *primals)
         out = jnp.zeros_like(y)
-        for mat, t in zip(matrices(*primals), tangents[1:4]):
+        for mat, t in zip(matrices(robot, *primals), tangents[:3]):
             if not zero(t):
                 out = out + mat @ t
         return y, out
 
-    return rule
+    f.defjvp(rule, symbolic_zeros=True)
+    return f
+
+
+def _concrete(robot) -> bool:
+    """Whether none of the robot's arrays is traced (by jit, vmap or a derivative in them)."""
+    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(robot))
 
 
 def _instantiate(p, t):
@@ -188,7 +194,10 @@ def _rnea_matrices(robot, q, qd, qdd, f_ext):
     return tuple(_matrix(m, _dtype()) for m in (dq, dv, M))
 
 
-_rnea_jvp.defjvp(_state_jvp(lambda *a: _rnea_core(*a), _rnea_matrices), symbolic_zeros=True)
+# only the public rnea and aba carry it: reverse mode transposes the full matrices (jax.grad 1.6x
+# slower than through the traversal) and the kernels compile longer, which the library's own
+# linearisations and fits need not pay
+_rnea_analytic = _state_derivative(lambda *a: _rnea_core(*a), _rnea_matrices)
 
 
 def _rnea_core(robot: Robot, q, qd, qdd, f_ext):
@@ -332,16 +341,10 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
     custom JVP, as :func:`rnea`'s)."""
     moving_inertia("aba", robot)
     q, qd, tau, f_ext = _checked("aba", robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
-    return _aba_jvp(robot, q, qd, tau, f_ext)
+    return (_aba_analytic if _concrete(robot) else lambda *a: _aba_core(*a, "aba"))(robot, q, qd, tau, f_ext)
 
 
-@jax.custom_jvp
-def _aba_jvp(robot, q, qd, tau, f_ext):
-    """:func:`_aba_core` with the analytic forward-mode derivative (see :func:`_rnea_jvp`)."""
-    return _aba_core(robot, q, qd, tau, f_ext, "aba")
-
-
-_aba_jvp.defjvp(_state_jvp(lambda *a: _aba_core(*a, "aba"), aba_derivatives), symbolic_zeros=True)
+_aba_analytic = _state_derivative(lambda *a: _aba_core(*a, "aba"), aba_derivatives)
 
 
 def _aba(robot: Robot, q, qd, tau, f_ext, fn):

@@ -105,6 +105,9 @@ def test_custom_jvps_equal_forward_mode_through_the_traversal():
     by_inertia = lambda fn: jax.jacfwd(lambda I: fn(robot.replace(inertia=I), *x))(robot.inertia)
     close(by_inertia(jflex.rnea), by_inertia(lambda r, *a: _rnea(r, *a, None, "rnea")))
     close(jax.jacfwd(lambda f: jflex.rnea(robot, *x, f_ext=f))(fext), jax.jacfwd(lambda f: _rnea(robot, *x, f, "rnea"))(fext))
+    # a robot traced by jit (its arrays unknown while the kernels trace) takes plain forward mode
+    traced = jax.jit(lambda r, q, qd, qdd: jax.jacfwd(lambda q_: jflex.rnea(r, q_, qd, qdd))(q))(robot, *x)
+    close(traced, jax.jacfwd(plain)(*x))
     # aba likewise (its JVP: aba_derivatives)
     ours = lambda *a: jflex.aba(robot, *a)
     plain = lambda *a: _aba(robot, *a, None, "aba")
