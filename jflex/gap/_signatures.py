@@ -66,12 +66,7 @@ def indistinguishable_from_inertia(problem: Problem, cands) -> dict:
     identification keeps the CAD inertias."""
     if not problem.ttrain or problem.inertia is None:
         return {}
-    sets = []
-    for st in problem.ttrain:
-        w = 1.0 / st.scale
-        Yw = (T._filtered(st, "Y") * w[None, :, None]).reshape(st.tau.size, -1)
-        sets.append((st, w, Yw))
-    YtY = sum(Yw.T @ Yw for _, _, Yw in sets)
+    YtY = sum(T.weighted_inertia_columns(st)[1] for st in problem.ttrain)
     d = np.sqrt(np.maximum(np.diag(YtY), 1e-300))
     pinv = np.linalg.pinv(YtY / d[:, None] / d[None, :], rcond=1e-12)
     out = {}
@@ -82,8 +77,9 @@ def indistinguishable_from_inertia(problem: Problem, cands) -> dict:
         if not term.n_params:
             continue
         YtA = AtA = 0.0
-        for st, w, Yw in sets:
-            A = (T.term_columns(term, st) * w[None, :, None]).reshape(st.tau.size, -1)
+        for st in problem.ttrain:
+            Yw = T.weighted_inertia_columns(st)[0]
+            A = (T.term_columns(term, st) * (1.0 / st.scale)[None, :, None]).reshape(st.tau.size, -1)
             YtA, AtA = YtA + Yw.T @ A, AtA + A.T @ A
         total = float(np.trace(AtA))
         if total <= 0:

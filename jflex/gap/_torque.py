@@ -247,6 +247,15 @@ def _filtered(s: TorqueSet, name: str):
     return s.cache[key]
 
 
+def weighted_inertia_columns(s: TorqueSet):
+    """``(Yw, Yw'Yw)``: the set's inertial columns through its parallel filter, rows normalised by
+    its torque scale, as every fit sees them (cached)."""
+    if "Yw" not in s.cache:
+        Yw = (_filtered(s, "Y") * (1.0 / s.scale)[None, :, None]).reshape(s.tau.size, -1)
+        s.cache["Yw"] = (Yw, Yw.T @ Yw)
+    return s.cache["Yw"]
+
+
 def _gram(terms, delay, s: TorqueSet, inertia):
     """Normal equations of one set, rows normalised by the set's torque scale: ``(G, b, y'y, rows)``
     over ``[delta (if inertia), theta]``. The delay advances the measurement (``tau(t + d)``), so
@@ -258,10 +267,7 @@ def _gram(terms, delay, s: TorqueSet, inertia):
     y = ((shift(s.tau, s.t, -delay) - _filtered(s, "F0")) * w[None, :]).ravel()
     if inertia is None:
         return A.T @ A, A.T @ y, float(y @ y), y.size
-    if "Yw" not in s.cache:
-        Yw = (_filtered(s, "Y") * w[None, :, None]).reshape(y.size, -1)
-        s.cache["Yw"] = (Yw, Yw.T @ Yw)
-    Yw, YtY = s.cache["Yw"]
+    Yw, YtY = weighted_inertia_columns(s)
     AtY = A.T @ Yw
     G = np.block([[YtY, AtY.T], [AtY, A.T @ A]])
     return G, np.concatenate([Yw.T @ y, A.T @ y]), float(y @ y), y.size
