@@ -45,6 +45,7 @@ from ._residuals import (
     TorqueData as TorqueData,
     model_modes as model_modes,
 )
+from ._frf_jacobian import sparse_frf_residual as sparse_frf_residual
 from ._ema import (
     FRFEstimate as FRFEstimate,
     LSCFResult as LSCFResult,

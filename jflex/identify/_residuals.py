@@ -270,13 +270,20 @@ class FRFData(AbstractData):
         return jax.vmap(f)(self.postures)
 
     def _log_ratio(self, model):
-        Hp = self.predict(model)
+        return self._log_ratio_of(self.predict(model))
+
+    def _log_ratio_of(self, Hp):
+        """``log(H_model / H_meas)`` over ``entries`` (P, F, e) from a prediction ``Hp`` (P, F, a, b)."""
         ii = jnp.array([e[0] for e in self.entries])
         jj = jnp.array([e[1] for e in self.entries])
         return jnp.log(Hp[:, :, ii, jj] / self.H[:, :, ii, jj])
 
     def residuals(self, model):
-        L = self._log_ratio(model)
+        return self._residuals_of(self.predict(model))
+
+    def _residuals_of(self, Hp):
+        """:meth:`residuals` from a predicted FRF ``Hp`` (P, F, a, b) (as :meth:`predict` returns)."""
+        L = self._log_ratio_of(Hp)
         n = jnp.sqrt(L.size)
         return {f"{self.name}:log_magnitude": self.weights[0] * jnp.real(L).ravel() / n,
                 f"{self.name}:phase": self.weights[1] * jnp.imag(L).ravel() / n}
