@@ -63,7 +63,7 @@ class SparseFRFResidual:
     """
 
     def __init__(self, spec, pair, index, u0, *, probes=3, seed=0, where="sparse_frf_residual"):
-        model, data = pair
+        data = pair[1]
         d = data[index]
         if not isinstance(d, FRFData):
             raise DataError(_fail(where, f"the sparse FRF Jacobian applies to FRFData only, got {type(d).__name__}"))
@@ -166,8 +166,12 @@ class SparseFRFResidual:
             # d log(kind H) = dH / H: the kind factor (i w, -w^2) does not depend on u
             return H * kf, dH / H[:, ii, jj][..., None]
 
+        def lin_twice(u):
+            out = lin(u)
+            return out, out
+
         def residual_and_jacobian(u):
-            (dA, dT), (A, T) = jax.jacfwd(lambda v: (lambda o: (o, o))(lin(v)), has_aux=True)(u)
+            (dA, dT), (A, T) = jax.jacfwd(lin_twice, has_aux=True)(u)  # d(M, C, K, T)/du and (M, C, K, T)
             col = jnp.max(jnp.abs(dA), axis=(0, 2, 3))  # (3, nu)
             leak = jnp.max(jnp.abs(jnp.where(outside, dA, 0.0)), axis=(0, 2, 3))
             bad = jnp.any(leak > _LEAK_RTOL * col) | jnp.any(dT != 0)
