@@ -10,11 +10,12 @@ Two exact Jacobians (``SOLVER/JAC`` rows):
 
 - ``fwd``: ``jax.jacfwd`` of the residual, through ``jflex.frf``'s own JVP (which reuses each
   frequency's inverse and contracts the DENSE tangents dK, dM, dC: generic, any parameter).
-- ``structured``: :func:`structured_residual`, the same residual function with a custom JVP that
-  contracts ``dH = -Y dD X`` only over the entries where ``d(M, C, K)/du`` is non-zero (4 per joint
-  stiffness or damping, 1 per rotor inertia; values by forward-mode AD of the linearisation, the
-  pattern found once numerically and the result checked against ``jax.jacfwd`` at two points).
-  Its primal IS the plain residual, so scipy's rows are unaffected.
+- ``structured``: the library's :func:`jflex.identify.sparse_frf_residual` (what
+  ``jflex.identify.fit(..., jacobian="sparse")`` uses), the same residual function with a custom
+  JVP that contracts ``dH = -Y dD X`` only over the entries where ``d(M, C, K)/du`` is non-zero (4
+  per joint stiffness or damping, 1 per rotor inertia; values by forward-mode AD of the
+  linearisation, the pattern found at build time; the result checked here against ``jax.jacfwd``
+  at two points). Its primal IS the plain residual, so scipy's rows are unaffected.
 
 Set-up: ``jflex.load_robot("ur5")`` (6 revolute joints, gravity as loaded) with
 ``FlexibleJoints(K, C, rotor_inertia=I_m, gear_ratio=100, coupling=False)`` on every joint; the
@@ -63,8 +64,6 @@ import scipy.optimize
 
 import jflex
 from jflex import identify as idf
-from jflex.linear import frf_matrices, linearization
-from jflex.linear._common import tool_jacobian
 
 GEAR = 100.0
 # planted values: reflected rotor inertias r^2 I_m of the order of the link inertias (2.3, 3.1, 0.85,
@@ -85,112 +84,6 @@ def _postures(n, seed=1):
     hi = np.array([1.0, -0.6, 2.0, -0.6, 1.4, 1.0])
     return lo + (hi - lo) * rng.uniform(size=(n, 6))
 
-
-
-class _GivenFRF(idf.FRFData):
-    """FRFData whose "model" is the predicted FRF itself: the residual as a function of H."""
-
-    def predict(self, H):
-        return H
-
-
-def structured_residual(spec, start, data, u0, probes=2, seed=3):
-    """The residual ``u -> residual_vector(spec.apply(start, u), data)`` with an exact JVP that
-    exploits the sparsity of ``d(M, C, K)/du``.
-
-    Primal: exactly the plain residual (scipy calls this). Tangent: ``dH = -Y dD X`` per posture
-    and frequency (``X = G T^T``, ``Y = T G``, ``G`` the inverse ``jflex.frf`` uses), with ``dD``
-    contracted entry by entry over the (matrix, i, j) entries where ``d(M, C, K)/du_k`` is
-    non-zero: 4 entries for a joint stiffness or damping, 1 for a rotor inertia, instead of the
-    144 a dense tangent carries (``jflex.frf``'s own JVP). The values ``d(M, C, K)/du`` come from
-    forward-mode AD of the linearisation at the evaluation point (exact); only the sparsity
-    pattern is found numerically, once, as the union over ``u0`` and ``probes`` random points
-    (checked against ``jax.jacfwd`` of the plain residual by the caller). The Jacobian is computed
-    once per point and applied to the tangent, so ``jax.jacfwd`` / ``jax.linearize`` (optimistix)
-    pay for it once, not per column."""
-    post, omega = data.postures, data.omega
-    given = _GivenFRF(np.asarray(post), np.asarray(omega), np.asarray(data.H), hold=data.hold, frame=data.frame,
-                      reference=data.reference, components=data.components, kind=data.kind, weights=tuple(np.asarray(data.weights)))
-
-    def lin(u):
-        m = spec.apply(start, u)
-
-        def one(q):
-            x0, l = linearization(m, q, data.hold)
-            T = tool_jacobian(m, x0, l.keep, data.frame, data.reference, data.components)
-            return l.M, l.C, l.K, T
-
-        return jax.vmap(one)(post)
-
-    jl = jax.jit(jax.jacfwd(lin))
-    rng = np.random.default_rng(seed)
-    u0 = np.asarray(u0)
-    mask = None
-    for pt in [u0] + [u0 + rng.normal(scale=0.3, size=u0.shape) for _ in range(probes)]:
-        dM, dC, dK, dT = (np.asarray(a) for a in jl(jnp.asarray(pt)))
-        assert not np.any(dT), "structured_residual: the tool Jacobian depends on the parameters"
-        nz = np.stack([np.abs(a).max(axis=0) > 0 for a in (dM, dC, dK)])  # (3, n, n, nu)
-        mask = nz if mask is None else mask | nz
-    nu = u0.shape[0]
-    ent = [np.argwhere(mask[..., k]) for k in range(nu)]
-    cap = max(len(e) for e in ent)
-    idx = np.zeros((nu, cap, 3), dtype=int)
-    valid = np.zeros((nu, cap))
-    for k, e in enumerate(ent):
-        idx[k, : len(e)], valid[k, : len(e)] = e, 1.0
-    kind, I, J = idx[..., 0], idx[..., 1], idx[..., 2]
-    tt = np.arange(nu)[:, None]
-    w = jnp.asarray(omega)
-    # d D / d A for A = M, C, K: -w^2, i w, 1 (real and imaginary parts), per tangent entry (nu, cap, nf)
-    fac_r = jnp.stack([-(w**2), jnp.zeros_like(w), jnp.ones_like(w)])[kind]
-    fac_i = jnp.stack([jnp.zeros_like(w), w, jnp.zeros_like(w)])[kind]
-
-    def h_and_jacobian(u):
-        M, C, K, T = lin(u)
-        dM, dC, dK, _ = jax.jacfwd(lin)(u)
-        coef = jnp.stack([dM, dC, dK], axis=1)[:, kind, I, J, tt] * valid  # (P, nu, cap)
-
-        def one(M, C, K, T, coef):
-            G = frf_matrices(M, C, K, omega)  # the inverse jflex.frf uses (receptance: x 1)
-            Y = jax.vmap(lambda g: T @ g)(G)
-            H = jax.vmap(lambda y: y @ T.T)(Y)  # = jflex.frf(..., frame) at this posture
-            X = jnp.einsum("fij,aj->fia", G, T)
-            Yg, Xg = Y[:, :, I], X[:, J, :]  # (nf, p, nu, cap), (nf, nu, cap, p)
-            cw = jnp.moveaxis(coef[..., None] * (fac_r + 1j * fac_i), 2, 0)  # (nf, nu, cap): dD entries
-            A = Yg * cw[:, None]
-            dH = 0.0
-            for k in range(cap):  # -sum_c cw Y[:, i_c] X[j_c, :]^T: elementwise (XLA's tiny complex dots are slow)
-                dH = dH - A[:, :, None, :, k] * jnp.moveaxis(Xg[:, :, k], 2, 1)[:, None]
-            return H, dH  # (nf, p, p, nu)
-
-        return jax.vmap(one)(M, C, K, T, coef)
-
-    def plain(u):
-        return idf.residual_vector(spec.apply(start, u), data)
-
-    @jax.custom_jvp
-    def resid(u):
-        return plain(u)
-
-    ii = np.array([e[0] for e in data.entries])
-    jj = np.array([e[1] for e in data.entries])
-
-    def r_and_jacobian(u):
-        """The residual and its Jacobian (m, nu): FRFData's layout, log-magnitude block then phase,
-        each the (P, nf, entries) array of log(H / H_meas) raveled, over sqrt(its size)."""
-        H, JH = h_and_jacobian(u)
-        JL = JH[:, :, ii, jj] * (1.0 / H[:, :, ii, jj])[..., None]  # d log H = dH / H, (P, nf, ne, nu)
-        scale = data.weights / np.sqrt(JL[..., 0].size)
-        Jr = jnp.concatenate([scale[0] * JL.real.reshape(-1, nu), scale[1] * JL.imag.reshape(-1, nu)])
-        return idf.residual_vector(H, given), Jr
-
-    @resid.defjvp
-    def _jvp(primals, tangents):
-        (u,), (du,) = primals, tangents
-        r, Jr = r_and_jacobian(u)
-        return r, Jr @ du
-
-    return resid, dict(cap=cap, entries=[len(e) for e in ent], r_and_jacobian=r_and_jacobian)
 
 
 def _timed(fn, u, reps=10):
@@ -290,7 +183,7 @@ def _run_row(a, S, row):
     label0, make = SOLVERS[name]
     solver = make(a.tol)
     if jac == "structured":
-        fn, info = structured_residual(S["spec"], S["start"], S["data"], u0)
+        fn = idf.sparse_frf_residual(S["spec"], S["start"], S["data"])
         fn2 = lambda u, args=None: fn(u)
         mode = "fwd"
     else:
@@ -376,7 +269,7 @@ def main(argv=None):
     r0, compile_res, t_res = _timed(r_jit, u0, 20)
     jac_fwd = jax.jit(jax.jacfwd(resid))
     J0, compile_jac, t_jac = _timed(jac_fwd, u0, 20)
-    sres, info = structured_residual(spec, start, data, u0)
+    sres = idf.sparse_frf_residual(spec, start, data)
     jac_s = jax.jit(jax.jacfwd(sres))
     Js, compile_js, t_js = _timed(jac_s, u0, 20)
     rng = np.random.default_rng(5)
@@ -422,7 +315,7 @@ def main(argv=None):
     n = u0.shape[0]
     print(f"per evaluation (jitted, best of 20): residual {1e3 * t_res:.2f} ms; Jacobian by jax.jacfwd (jflex.frf's JVP) "
           f"{1e3 * t_jac:.2f} ms ({t_jac / t_res:.1f}x the residual); structured exact Jacobian {1e3 * t_js:.2f} ms "
-          f"({t_js / t_res:.1f}x; sparsity entries per parameter {info['entries']}); an FD Jacobian is {n} residuals. "
+          f"({t_js / t_res:.1f}x; sparsity entries per parameter {list(sres.entries_per_parameter)}); an FD Jacobian is {n} residuals. "
           f"Compile: residual {compile_res:.1f} s, jacfwd {compile_jac:.1f} s, structured {compile_js:.1f} s")
     best_s = min(sc, key=lambda r: r["t"]) if sc else None
     if best_s is not None:
