@@ -546,7 +546,8 @@ def fit(
       ``"sparse"``: every :class:`FRFData` residual gets the structured exact Jacobian of
       :func:`sparse_frf_residual` (the entries of ``(M, C, K)`` each parameter moves, found once
       at the start; 2.5-4x the residual instead of 7-12x), the other data the dense one. Raises
-      if no data is an FRFData, or an FRFData's tool Jacobian depends on the parameters.
+      if no data is an FRFData, or for an FRFData whose tool Jacobian depends on the parameters,
+      whose model has a frequency-dependent effect (hysteretic) or whose own arrays are free.
 
     Gauss-Newton-type solvers (Levenberg-Marquardt, Gauss-Newton, Dogleg) get the residual and
     its Jacobian from ONE compiled function of the parameters (``jax.jacfwd``: the p tangents
