@@ -59,7 +59,8 @@ class SparseFRFResidual:
       point and applies it to the tangent, so ``jax.jacfwd`` pays for it once, not per column.
     - ``residual_and_jacobian(u)``: ``(r, J)`` directly.
     - ``channels``: the residual's channel names and lengths, in order (as ``FRFData.residuals``).
-    - ``entries_per_parameter``: how many (matrix, i, j) entries of ``(M, C, K)`` each parameter moves.
+    - ``entries_per_parameter``: how many (matrix, i, j) entries of ``(M, C, K)`` each parameter moves;
+      ``pattern``: those entries, bool (3, n, n, size) (matrix M, C, K; row; column; parameter).
     """
 
     def __init__(self, spec, pair, index, u0, *, probes=3, seed=0, where="sparse_frf_residual"):
