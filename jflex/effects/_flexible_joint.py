@@ -61,6 +61,33 @@ def _smooth_sign(v, v_s):
     return jnp.tanh(v / v_s)
 
 
+def _smooth_abs_integral(u, eps):
+    # F(u) = int sqrt(u^2 + eps^2) du
+    r = jnp.sqrt(u * u + eps * eps)
+    return 0.5 * (u * r + eps * eps * jnp.arcsinh(u / eps))
+
+
+def smooth_saturation(d, b, eps):
+    """``(sqrt((d + b)^2 + eps^2) - sqrt((d - b)^2 + eps^2)) / 2``: the clamp of ``d`` to
+    ``[-b, b]`` with its corners rounded over ``eps`` (its slope lies in [0, 1); exactly 0 for
+    ``b = 0``). The smooth dead zone of a transmission with play is ``d - smooth_saturation(d, b, eps)``."""
+    return 0.5 * (jnp.sqrt((d + b) ** 2 + eps * eps) - jnp.sqrt((d - b) ** 2 + eps * eps))
+
+
+def smooth_dead_zone(d, b, eps):
+    """Smooth dead zone of half-width ``b``: ``~ sign(d) max(|d| - b, 0)``, corners rounded over
+    ``eps`` (slope in (0, 1]: the spring never stiffens beyond ``k`` nor turns negative);
+    ``d`` exactly for ``b = 0``. Beyond the corner (``|d| - b >> eps``) it is
+    ``d - b sign(d)`` to ``eps^2 / (4 (|d| - b))``."""
+    return d - smooth_saturation(d, b, eps)
+
+
+def _saturation_energy(d, b, eps):
+    # int_0^d smooth_saturation: exactly 0 for b = 0 (the same numbers subtracted)
+    return 0.5 * ((_smooth_abs_integral(d + b, eps) - _smooth_abs_integral(d - b, eps))
+                  - (_smooth_abs_integral(b, eps) - _smooth_abs_integral(-b, eps)))
+
+
 class FlexibleJoints(AbstractEffect):
     """Torsion spring + damper between link and motor at the selected joints.
 
@@ -75,6 +102,21 @@ class FlexibleJoints(AbstractEffect):
     - ``motor_viscous``, ``motor_coulomb``: (m,) motor-side friction (after the gear) F_vm, F_sm.
     - ``coulomb_velocity``: () smoothing velocity of the Coulomb terms [rad/s] (tanh(v / v_s)).
     - ``coupling``: static; True for the full model with S(q), False for the reduced Spong model.
+    - ``play``: (m,) or None (default: no play, the plain spring). Half-width ``b`` [rad] of the
+      play (backlash) inside each transmission: the spring torque is ``k dz(theta - q, b) + c
+      (theta_dot - q_dot)`` with ``dz`` a dead zone of half-width ``b`` (inside it the link is
+      free of the spring; the damper acts throughout). Diagonal stiffness only.
+    - ``play_smoothing``: () width ``eps`` [rad] over which the dead zone's corners are rounded
+      (:func:`smooth_dead_zone`; default 1e-5 rad): the spring's stiffness goes from ~0 to ``k``
+      within a few ``eps`` of ``|theta - q| = b``, so adaptive ODE solvers and forward-mode
+      Jacobians (in ``b`` too) meet a smooth force; a sharp corner would make the solver hunt for
+      each contact and the Jacobian jump. The stiffness left in the middle of the gap is
+      ``~ k eps^2 / (2 b^2)``; the static deflection under a torque ``tau`` is ``b + tau / k`` to
+      ``~ eps^2 k / (4 tau)``. Play 0 is the plain spring exactly (bit for bit).
+
+    The play enters as the spring's potential energy ``k (d^2 / 2 - int_0^d sat)`` (``sat`` the
+    smooth clamp to [-b, b]), so the spring stays conservative and the Lagrangian machinery
+    (energy, linearisation) holds.
 
     Note: a smooth Coulomb term linearises at rest to a viscous coefficient F_s / v_s; set the
     Coulomb coefficients to 0 for a modal analysis in the sense of seed 003 (Coulomb neglected).
@@ -89,6 +131,8 @@ class FlexibleJoints(AbstractEffect):
     motor_viscous: jnp.ndarray
     motor_coulomb: jnp.ndarray
     coulomb_velocity: jnp.ndarray
+    play: jnp.ndarray | None
+    play_smoothing: jnp.ndarray | None
     joints: tuple[int, ...] = eqx.field(static=True)
     coupling: bool = eqx.field(static=True, default=True)
 
@@ -106,6 +150,8 @@ class FlexibleJoints(AbstractEffect):
         motor_coulomb=None,
         coulomb_velocity=1e-3,
         coupling: bool = True,
+        play=None,
+        play_smoothing=1e-5,
     ):
         K = jnp.asarray(stiffness, dtype=float)
         if K.ndim not in (1, 2):
@@ -140,6 +186,15 @@ class FlexibleJoints(AbstractEffect):
         self.motor_coulomb = vec(motor_coulomb, "motor_coulomb", 0.0)
         self.coulomb_velocity = jnp.asarray(coulomb_velocity, dtype=float)
         self.coupling = bool(coupling)
+        if play is None:
+            self.play = self.play_smoothing = None
+        else:
+            if K.ndim != 1:
+                raise ShapeError("FlexibleJoints.play: play needs a diagonal stiffness (m,); got a stiffness matrix")
+            self.play = vec(play, "play", 0.0)
+            self.play_smoothing = jnp.asarray(play_smoothing, dtype=float)
+            if self.play_smoothing.shape != ():
+                raise ShapeError(f"FlexibleJoints.play_smoothing: expected a scalar [rad], got shape {self.play_smoothing.shape}")
 
     def __check_init__(self):
         K = _concrete(self.stiffness)
@@ -162,6 +217,17 @@ class FlexibleJoints(AbstractEffect):
         r = _concrete(self.gear_ratio)
         if r is not None and not np.all(r > 0):
             raise ParameterError(f"FlexibleJoints.gear_ratio: must be > 0, got {r.tolist()}")
+        if self.play is not None:
+            b = _concrete(self.play)
+            if b is not None and not (np.all(np.isfinite(b)) and np.all(b >= 0)):
+                bad = [self.joints[i] for i in np.flatnonzero(~(np.isfinite(b) & (b >= 0)))]
+                raise ParameterError(
+                    f"FlexibleJoints.play: every play (backlash half-width) must be finite and >= 0 [rad]; joints {bad} "
+                    f"have {b[~(np.isfinite(b) & (b >= 0))].tolist()}"
+                )
+            eps = _concrete(self.play_smoothing)
+            if eps is not None and not (np.isfinite(eps) and eps > 0):
+                raise ParameterError(f"FlexibleJoints.play_smoothing: must be finite and > 0 [rad], got {eps}")
         vs = _concrete(self.coulomb_velocity)
         if vs is not None and not vs > 0:
             raise ParameterError(f"FlexibleJoints.coulomb_velocity: must be > 0 [rad/s], got {vs}")
@@ -213,7 +279,21 @@ class FlexibleJoints(AbstractEffect):
     def potential_energy(self, robot, slots: Slots, x):
         q, th = self._split(slots, x)
         d = q - th
-        return 0.5 * d @ (self._matrix(self.stiffness) @ d)
+        V = 0.5 * d @ (self._matrix(self.stiffness) @ d)
+        if self.play is None:
+            return V
+        # the dead zone: the spring's energy less that of its clamp to [-b, b] (0 for b = 0)
+        return V - jnp.sum(self.stiffness * _saturation_energy(d, self.play, self.play_smoothing))
+
+    def spring_torque(self, robot, slots: Slots, x, xd):
+        """Torque (m,) the transmission passes from motor to link, ``k dz(theta - q, b) +
+        c (theta_dot - q_dot)`` (``K (theta - q) + B (theta_dot - q_dot)`` without play)."""
+        q, th = self._split(slots, x)
+        qd, thd = self._split(slots, xd)
+        d = th - q
+        el = self._matrix(self.stiffness) @ d if self.play is None else \
+            self.stiffness * smooth_dead_zone(d, self.play, self.play_smoothing)
+        return el + self._matrix(self.damping) @ (thd - qd)
 
     def generalized_force(self, robot, slots: Slots, t, x, xd, z):
         idx = jnp.array(self.joints, dtype=int)
