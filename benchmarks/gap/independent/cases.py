@@ -322,8 +322,11 @@ def tip_case(folder, robot, effects, seed, small=False, cad_error=False):
     """Tool positions only (a tracker's view) under applied torques, from rest at a drawn posture:
     two training records and one validation record, 1 s each at 200 Hz, 0.1 mm white noise; the
     rotor inertias stated as nominal values. ``effects``: () or ("joint_flexibility",): a spring
-    at a drawn joint whose mode lies at 4-12 Hz. ``cad_error``: the case's robot a few per cent off
-    (tip records alone cannot identify the inertias; off by default)."""
+    at a drawn joint whose mode lies at 4-12 Hz; ("joint_flexibility", "backlash"): that spring
+    with play of half-width 2-5 mrad inside it (a sharp dead zone, :func:`.tip.dead_zone`; the
+    applied torques reverse at every joint along these motions, so the play shows). ``cad_error``:
+    the case's robot a few per cent off (tip records alone cannot identify the inertias; off by
+    default)."""
     rng = np.random.default_rng(seed)
     true, tool, home = R.true_model(robot)
     nom, cad = R.cad_error(true, rng) if cad_error else (true, [])
@@ -332,9 +335,17 @@ def tip_case(folder, robot, effects, seed, small=False, cad_error=False):
     Mh = np.diag(pin.crba(true, data, home))
     rotor = Mh * rng.uniform(0.15, 0.3, n)
     flex, truth_eff = None, []
+    if "backlash" in effects and "joint_flexibility" not in effects:
+        raise KeyError("tip cases plant backlash inside a spring: effects ('joint_flexibility', 'backlash')")
     for eff in effects:
+        if eff == "backlash":  # play inside the spring drawn before it (same joint)
+            j = flex[0]
+            b = float(rng.uniform(0.002, 0.005))
+            flex = flex + (b,)
+            truth_eff.append(dict(effect=eff, joint=_jn(true, j), params={"b": b}, in_library=True))
+            continue
         if eff != "joint_flexibility":
-            raise KeyError(f"tip cases plant joint_flexibility only, got {eff!r}")
+            raise KeyError(f"tip cases plant joint_flexibility (and backlash inside it) only, got {eff!r}")
         j = int(rng.integers(0, n))
         f = rng.uniform(4.0, 12.0)  # [Hz] the motor's mode on its spring
         k = float((2 * np.pi * f) ** 2 * rotor[j])
@@ -384,8 +395,9 @@ def make_case(folder, kind="torque", robot="arm3", effects=(), seed=0, small=Fal
 # --- the bench's list of cases --------------------------------------------------------------------
 def plan(size: str = "small") -> list[dict]:
     """Cases of the bench: ``id``, ``kind``, ``robot``, ``effects``, ``seed``. ``small``: 11 cases,
-    every family (single, pair, out-of-library, null) and data kind; ``full``: 38 (the last two tip
-    records only)."""
+    every family (single, pair, out-of-library, null) and data kind; ``full``: 39 (36-37 tip
+    records only: a flexible joint and a null case; 38, appended last so the others keep their
+    ids: tip records of a flexible joint with backlash inside its transmission)."""
     S_ = [("torque", "arm3", ("stribeck_friction",)), ("torque", "ur5", ("payload",)),
           ("torque", "arm3", ("joint_flexibility",)), ("frf", "arm3", ("orthogonal_compliance",)),
           ("modal", "arm3", ("payload",)), ("torque", "panda", ("coulomb_friction", "sensor_delay")),
@@ -405,6 +417,8 @@ def plan(size: str = "small") -> list[dict]:
         S_ += [("torque", r, ()) for r in robots] + [("frf", "arm3", ()), ("frf", "ur5", ()), ("modal", "arm3", ())]
         # tool positions only: a flexible joint only a simulation shows, and a null case
         S_ += [("tip", "arm3", ("joint_flexibility",)), ("tip", "arm3", ())]
+        # backlash inside the compliant transmission: a candidate only a simulation shows too
+        S_ += [("tip", "arm3", ("joint_flexibility", "backlash"))]
     out = []
     for i, (kind, robot, eff) in enumerate(S_):
         out.append(dict(id=f"{i:02d}_{kind}_{robot}_{'+'.join(eff) or 'null'}", kind=kind, robot=robot, effects=list(eff),

@@ -6,7 +6,9 @@ laser tracker's view). No jflex code.
 State ``[q (n), qd (n), theta, theta_d]``: the links with every rigid joint's rotor inertia
 added to the diagonal of M(q), the flexible joint's link driven by the spring torque
 ``k (theta - q_j) + c (theta_d - qd_j)`` instead of the applied one, and its motor by
-``I_m theta_dd = tau_j - spring``.
+``I_m theta_dd = tau_j - spring``. Backlash inside the transmission (``flex = (j, k, c, b)``):
+the elastic part is ``k dz(theta - q_j)`` with the sharp dead zone ``dz(d) = sign(d) max(|d| - b, 0)``
+(the link free of the spring within ``b`` either side; the damper acts throughout).
 """
 
 from __future__ import annotations
@@ -39,18 +41,24 @@ def applied_torques(model, rotor, q, qd, qdd):
     return np.array([pin.rnea(model, data, a, b, c) for a, b, c in zip(q, qd, qdd)]) + np.asarray(rotor)[None] * qdd
 
 
+def dead_zone(d, b):
+    """Sharp dead zone of half-width ``b``: ``sign(d) max(|d| - b, 0)``."""
+    return np.sign(d) * max(abs(d) - b, 0.0)
+
+
 def simulate_tip(model, tool, rotor, t, tau, q0, flex=None):
     """Tool positions (N, 3) [m] of ``model`` from rest at ``q0`` under the applied torques ``tau``
     (N, n) sampled at ``t`` (linear interpolation), the rotors' inertias ``rotor`` (n,) on the
     links' side; ``flex = (j, k, c)``: joint ``j`` a spring to its motor (``rotor[j]`` then on the
-    motor side)."""
+    motor side); ``(j, k, c, b)``: with play of half-width ``b`` [rad] inside the transmission."""
     data = model.createData()
     n = model.nq
     fid = model.getFrameId(tool)
     rot = np.asarray(rotor, float).copy()
-    j = None
+    j, b = None, 0.0
     if flex is not None:
-        j, k, c = flex
+        j, k, c = flex[:3]
+        b = float(flex[3]) if len(flex) > 3 else 0.0
         im = rot[j]
         rot[j] = 0.0
 
@@ -68,7 +76,8 @@ def simulate_tip(model, tool, rotor, t, tau, q0, flex=None):
             out[n:2 * n] = np.linalg.solve(M, u - h)
             return out
         th, thd = x[2 * n], x[2 * n + 1]
-        spring = k * (th - q[j]) + c * (thd - qd[j])
+        d = th - q[j]
+        spring = k * dead_zone(d, b) + c * (thd - qd[j])
         ul = u.copy()
         ul[j] = spring
         out[n:2 * n] = np.linalg.solve(M, ul - h)
@@ -77,7 +86,8 @@ def simulate_tip(model, tool, rotor, t, tau, q0, flex=None):
         return out
 
     g = pin.computeGeneralizedGravity(model, data, np.asarray(q0, float))
-    x0 = np.concatenate([q0, np.zeros(n)] + ([[q0[j] + g[j] / k, 0.0]] if j is not None else []))
+    # at rest the spring holds the link's gravity torque: deflected b past the play in its direction
+    x0 = np.concatenate([q0, np.zeros(n)] + ([[q0[j] + g[j] / k + np.sign(g[j]) * b, 0.0]] if j is not None else []))
     sol = solve_ivp(rhs, (t[0], t[-1]), x0, method="DOP853", t_eval=t, rtol=1e-9, atol=1e-11,
                     max_step=float(t[1] - t[0]))
     if not sol.success:
