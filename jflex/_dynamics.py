@@ -274,6 +274,8 @@ def _crba(robot: Robot, q, fn, check=True):
 
 
 # ---- ABA: 6-vectors and 6x6 matrices as lists of scalars ((w, v) ordering) ----------------
+# The articulated inertias are symmetric: only the 21 upper-triangle entries are computed, and
+# the lower triangle holds the same scalars (mirrored references, see _sym6).
 
 
 def _v6(w, v):
@@ -284,24 +286,13 @@ def _mv6(A, x):
     return [s.sum_(*(s.mul(a, b) for a, b in zip(row, x))) for row in A]
 
 
-def _mtv6(A, x):
-    return [s.sum_(*(s.mul(A[k][j], x[k]) for k in range(6))) for j in range(6)]
-
-
-def _mm6(A, B):
-    return [[s.sum_(*(s.mul(A[i][k], B[k][j]) for k in range(6))) for j in range(6)] for i in range(6)]
-
-
-def _X6(R, p):
-    """Motion transform parent -> child at (R, p): [[R^T, 0], [-R^T [p]x, R^T]]."""
-    Rt = R.T
-    B = Rt.mm(s.skew(p))
-    rows = []
-    for i in range(3):
-        rows.append(list(Rt.r[i]) + [0.0, 0.0, 0.0])
-    for i in range(3):
-        rows.append([s.mul(-1.0, x) for x in B.r[i]] + list(Rt.r[i]))
-    return rows
+def _sym6(entry, n=6):
+    """The symmetric n x n list whose upper-triangle entry (r, k), r <= k, is ``entry(r, k)``."""
+    M = [[None] * n for _ in range(n)]
+    for r in range(n):
+        for k in range(r, n):
+            M[r][k] = M[k][r] = entry(r, k)
+    return M
 
 
 def _I6(I: s.Inertia):
@@ -311,21 +302,62 @@ def _I6(I: s.Inertia):
     return rows
 
 
+def _unit_axis(S):
+    """k when the 6-vector S is +-e_k in trace-time floats (a joint about or along a body axis),
+    else None."""
+    nz = [k for k, x in enumerate(S) if not s._is(x, 0.0)]
+    if len(nz) == 1 and (s._is(S[nz[0]], 1.0) or s._is(S[nz[0]], -1.0)):
+        return nz[0]
+    return None
+
+
+def _congruence(R: s.M33, p: s.V3, Ia):
+    """X^T Ia X for symmetric Ia and the motion transform X = [[R^T, 0], [-R^T [p]x, R^T]] of a
+    body at (R, p) in its parent, in 3x3 blocks: with Ia = [[A, B], [B^T, C]], rotate each block
+    (A1 = R A R^T, ...), then shift: [[A1 + P B1^T - B2 P, B2], [B2^T, C1]], B2 = B1 + P C1,
+    P = [p]x (p is a trace-time constant for a revolute joint). Two dense 6x6 products cost
+    about 2.5x the operations."""
+    Rr = [list(row) for row in R.r]
+    blk = lambda r0, c0: [[Ia[r0 + r][c0 + c] for c in range(3)] for r in range(3)]
+    A, B, C = blk(0, 0), blk(0, 3), blk(3, 3)
+
+    def left(M):  # R M
+        return [[s.signed_sum((Rr[i][k], M[k][j]) for k in range(3)) for j in range(3)] for i in range(3)]
+
+    def right(M, sym):  # M R^T (upper triangle mirrored when sym)
+        e = lambda i, j: s.signed_sum((M[i][k], Rr[j][k]) for k in range(3))
+        return _sym6(e, 3) if sym else [[e(i, j) for j in range(3)] for i in range(3)]
+
+    A1, B1, C1 = right(left(A), True), right(left(B), False), right(left(C), True)
+    P = [list(row) for row in s.skew(p).r]
+    B2 = [[s.add(B1[i][j], s.signed_sum((P[i][k], C1[k][j]) for k in range(3))) for j in range(3)] for i in range(3)]
+    A2 = _sym6(lambda i, j: s.sub(s.add(A1[i][j], s.signed_sum((P[i][k], B1[j][k]) for k in range(3))),
+                                  s.signed_sum((B2[i][k], P[k][j]) for k in range(3))), 3)
+    return [A2[r] + B2[r] for r in range(3)] + [[B2[c][r] for c in range(3)] + C1[r] for r in range(3)]
+
+
 def _barrier6(fence, *blocks):
-    """:func:`_scalar.barrier` for nested lists of scalars (6-vectors, 6x6 matrices)."""
-    flat = []
+    """:func:`_scalar.barrier` for nested lists of scalars (6-vectors, 6x6 matrices); a scalar held
+    twice (the mirrored half of a symmetric matrix) passes once and stays shared."""
+    flat, seen = [], {}
 
     def put(x):
         if isinstance(x, list):
             return [put(y) for y in x]
-        flat.append(x)
-        return len(flat) - 1
+        if isinstance(x, float) or x is None:
+            return ("c", x)
+        if id(x) not in seen:
+            seen[id(x)] = len(flat)
+            flat.append(x)
+        return seen[id(x)]
 
     tags = [put(b) for b in blocks]
     vals = s.barrier(*flat, fence=fence)
 
     def get(t):
-        return [get(y) for y in t] if isinstance(t, list) else vals[t]
+        if isinstance(t, list):
+            return [get(y) for y in t]
+        return t[1] if isinstance(t, tuple) else vals[t]
 
     return [get(t) for t in tags]
 
@@ -357,7 +389,6 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
     n = robot.nq
     c = consts(robot)
     ls = walk(robot, c, q, qd)
-    X = [_X6(ls.R[i], ls.p[i]) for i in range(n)]
     S = [_v6(*motion(robot, c, i)) for i in range(n)]
     IA, pA, cc = [], [], []
     for i in range(n):
@@ -372,7 +403,7 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
         sw, sv = motion(robot, c, i)
         cw, cv = s.cross_motion(ls.w[i], ls.v[i], sw.scale(qd[i]), sv.scale(qd[i]))
         cc.append(_v6(cw, cv))
-    U, D, u = [None] * n, [None] * n, [None] * n
+    U, D, Dinv, u = [None] * n, [None] * n, [None] * n, [None] * n
     for i in reversed(range(n)):
         U[i] = _mv6(IA[i], S[i])
         D[i] = s.sum_(*(s.mul(a, b) for a, b in zip(S[i], U[i])))
@@ -382,27 +413,31 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
                 f"{fn}: joint '{robot.joint_names[i]}' moves no inertia (articulated inertia {D[i]} about its axis): "
                 "the mass matrix is singular; give the links it carries inertial parameters (robot.inertia)"
             )
+        Dinv[i] = 1.0 / D[i]
         par = robot.parents[i]
         if par >= 0:
-            Dinv = 1.0 / D[i]
-            Ia = [[s.sub(IA[i][r][k], s.mul(s.mul(U[i][r], U[i][k]), Dinv)) for k in range(6)] for r in range(6)]
-            uD = s.mul(u[i], Dinv)
+            # Ia = IA - U U^T / D, symmetric; Ia S = 0, so for S = +-e_k its row and column k are
+            # exactly zero (set so, which folds them out of what follows)
+            k = _unit_axis(S[i])
+            UD = [s.mul(x, Dinv[i]) for x in U[i]]
+            Ia = _sym6(lambda r, j: 0.0 if k in (r, j) else s.sub(IA[i][r][j], s.mul(UD[r], U[i][j])))
+            uD = s.mul(u[i], Dinv[i])
             Iac = _mv6(Ia, cc[i])
             pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
             Ia, pa = _barrier6(c.fence, Ia, pa)
-            XtIa = [list(col) for col in zip(*_mm6([list(r) for r in zip(*X[i])], Ia))]  # (X^T Ia)^T
-            XtIaX = _mm6([list(r) for r in zip(*XtIa)], X[i])
-            IA[par] = [[s.add(IA[par][r][k], XtIaX[r][k]) for k in range(6)] for r in range(6)]
-            Xtpa = _mtv6(X[i], pa)
-            pA[par] = [s.add(a, b) for a, b in zip(pA[par], Xtpa)]
+            XtIaX = _congruence(ls.R[i], ls.p[i], Ia)
+            IA[par] = _sym6(lambda r, j: s.add(IA[par][r][j], XtIaX[r][j]))
+            fw, fv = s.force_to_parent(ls.R[i], ls.p[i], s.V3(*pa[:3]), s.V3(*pa[3:]))
+            pA[par] = [s.add(a, b) for a, b in zip(pA[par], _v6(fw, fv))]
             IA[par], pA[par] = _barrier6(c.fence, IA[par], pA[par])
-    a0 = [0.0, 0.0, 0.0] + list(-c.gravity)
+    a0 = (s.ZERO, -c.gravity)
     a = [None] * n
     qdd = [None] * n
     for i in range(n):
         par = robot.parents[i]
-        ap = [s.add(x, y) for x, y in zip(_mv6(X[i], a0 if par < 0 else a[par]), cc[i])]
-        qdd[i] = s.mul(s.sub(u[i], s.sum_(*(s.mul(x, y) for x, y in zip(U[i], ap)))), 1.0 / D[i])
+        aw, av = a0 if par < 0 else (s.V3(*a[par][:3]), s.V3(*a[par][3:]))
+        ap = [s.add(x, y) for x, y in zip(_v6(*s.motion_to_child(ls.R[i], ls.p[i], aw, av)), cc[i])]
+        qdd[i] = s.mul(s.sub(u[i], s.sum_(*(s.mul(x, y) for x, y in zip(U[i], ap)))), Dinv[i])
         a[i] = [s.add(x, s.mul(y, qdd[i])) for x, y in zip(ap, S[i])]
         a[i], (qdd[i],) = _barrier6(c.fence, a[i], [qdd[i]])
     out = s.stack(qdd, _dtype())
