@@ -247,15 +247,17 @@ def test_linear_model_equals_linearize_of_flexible_joint_model(rotor_case):
 def test_frequency_model_is_jflex_linear_of_its_model(rotor_case):
     """The diagnosis's fast evaluator gives what jflex.linear.frf gives for the jflex.Model it stands
     for (the effects' own Spring, damping laws and Payload, rigid joints held), for every law of
-    jflex.effects, a coupled bearing pair, a link hinge and a payload."""
+    jflex.effects, a coupled bearing pair, a link hinge and a payload (a rigid body off the tool
+    frame's origin: mass, centre of mass, rotational inertia)."""
     c = load_case(rotor_case)
     E = jflex.effects
     sites = (L.Site("joint", 0), L.Site("joint", 1, law=E.Hysteretic(eta=1.0)), L.Site("joint", 2, law=E.Fractional(1.0, 0.4)),
              L.Site("orth", 0, 0), L.Site("orth", 0, 1, coupled=True), L.Site("link", 1, 0, frac=0.4), L.Site("link", 1, 1, frac=0.4))
-    lm = L.FrequencyModel(c.robot, L.Structure(sites, payload=True), "tool")
+    lm = L.FrequencyModel(c.robot, L.Structure(sites, payload=10), "tool")
     k = np.array([3e4, 5e4, 2e4, 4e5, 2e5, 8e4, 9e4])
     cc = np.array([30.0, 0.05 * 5e4, 40.0, 400.0, 200.0, 80.0, 90.0])
-    x = np.r_[np.log(k), np.log(cc), np.log(1.5), np.arctanh(0.3)]
+    pay = np.r_[np.log(1.5), 0.02, -0.03, 0.05, np.log([0.02, 0.03, 0.01]), 0.01, -0.02, 0.005]
+    x = np.r_[np.log(k), np.log(cc), pay, np.arctanh(0.3)]
     q0 = np.array([0.3, 0.8, -1.1])
     freq = np.array([5.0, 20.0, 40.0, 90.0])
     H = lm.frf(x, q0, freq)
@@ -264,12 +266,54 @@ def test_frequency_model_is_jflex_linear_of_its_model(rotor_case):
     np.testing.assert_allclose(H, np.asarray(Hj), rtol=1e-7, atol=1e-14 * np.abs(H).max())
     # and its analytic derivatives in the log parameters match central differences of it
     _, dH = lm.frf_jacobian(x, q0, freq)
-    for p in (1, 8, 9, 14, 15):
+    for p in (1, 8, 9, 14, 15, 17, 19, 22, 24):
         h = 1e-6
         e = np.zeros_like(x)
         e[p] = h
         fd = (lm.frf(x + e, q0, freq) - lm.frf(x - e, q0, freq)) / (2 * h)
         np.testing.assert_allclose(dH[p], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+
+
+def test_payload_candidate_recovers_mass_and_centre_of_mass(tmp_path):
+    """The frequency-side payload candidate is a rigid body, not a point mass: planted off the tool
+    frame's origin (2 kg, centre of mass (30, -20, 50) mm, a 6 cm sphere's inertia the candidate
+    does not fit; the jflex-family generator's FRFs, 1 % noise, two training postures), it is
+    recovered within 3 % in mass and 1 cm in centre of mass (seen: 0.6 %, 1.3 mm; on the full
+    frequency grid 1.4 %, 6 mm: the noise on two postures pins the lever arm along the link least),
+    and it predicts the held-out posture far better than a point mass at the origin does (seen: a
+    residual 37x smaller)."""
+    import types
+
+    from jflex.gap._case import Dataset
+    from jflex.gap._frequency_kinds import ToolPayload
+
+    robot = G.load_robot(G.write_robot(tmp_path, "arm3"))
+    sites = [L.Site("joint", j) for j in range(3)]
+    k = np.array([4e4, 6e4, 2e4])
+    c = 6e-4 * k
+    m, com = 2.0, np.array([0.03, -0.02, 0.05])  # (the arm's tool axes are its last link's)
+    rng = np.random.default_rng(0)
+    sets = []
+    freq = G.FRF_FREQ[::2]  # (180 lines: the peaks stay resolved, the fits take half the time)
+    for i, q0 in enumerate([np.array([0.0, 0.5, -1.2]), np.array([0.0, 1.0, -0.7]), np.array([0.0, 0.3, -1.6])]):
+        H = G.frf_truth(robot, "tool", sites, np.diag(k), [["viscous", float(v), 0.5] for v in c], q0, freq, (m, list(com)))
+        H = H * (1 + 0.01 * (rng.normal(size=H.shape) + 1j * rng.normal(size=H.shape)) / np.sqrt(2))
+        sets.append(Dataset(kind="frf", file=None, name=f"p{i}", split="train", arrays=dict(q0=q0, freq=freq, H=H)))
+    # what ToolPayload.add asks of the problem
+    pb = types.SimpleNamespace(ftrain=sets[:2], _frequency_model=lambda rob, st: L.FrequencyModel(rob, st, "tool"))
+    lm0 = L.FrequencyModel(robot, L.Structure(tuple(sites)), "tool")
+    x0, _ = L.fit_linear(lm0, np.log(np.r_[k * [1.1, 0.9, 1.1], c]), pb.ftrain)  # the nominal springs
+    kind = ToolPayload()
+    assert kind.n_params == 4
+    lm, x = kind.add(pb, lm0, x0, None)
+    pp = lm.payload_parameters(x)
+    assert pp["mass [kg]"] == pytest.approx(m, rel=0.03), pp
+    assert np.linalg.norm(np.asarray(pp["com (tool frame) [m]"]) - com) < 0.01, pp
+    point = ToolPayload()
+    point.n_params = 1  # the former candidate: a point mass at the tool frame's origin
+    lp, xp = point.add(pb, lm0, x0, None)
+    held_out = lambda lm_, x_: float(np.sum(L.residual(lm_, x_, sets[2:], peaks=False) ** 2))
+    assert held_out(lm, x) < 0.2 * held_out(lp, xp)
 
 
 def test_a_damping_law_defined_outside_gap_is_a_frequency_candidate():

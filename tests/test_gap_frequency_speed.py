@@ -4,6 +4,7 @@ posture's values (a diagnosis's selection moved on a 1e-15 change of the modal e
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -104,3 +105,46 @@ def test_shifted_inertia_model_is_not_served_the_cad_values(lm):
     assert np.abs(H1 - H0).max() > 1e-6 * np.abs(H0).max()
     np.testing.assert_array_equal(sh.frf_jacobian(x, q0, freq)[0], H1)
     np.testing.assert_array_equal(lm.frf(x, q0, freq), H0)
+
+
+@pytest.mark.parametrize("n", [4, 10])
+def test_payload_body_is_jflex_payload_in_the_tool_frame(lm, n):
+    """A payload of 4 (mass, centre of mass) or 10 (and its rotational inertia) parameters, on a tool
+    frame turned and moved on its link: its basis is the linearisation's change with each of the
+    link's inertial parameters (the jflex.effects.Payload the model holds: tests/test_gap.py checks
+    the FRF against jflex.linear.frf), its analytic derivatives central differences, and it reports
+    the body planted, in the tool frame."""
+    robot = lm.robot.replace(frame_R=jnp.asarray([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]),
+                             frame_p=jnp.asarray([[0.5, 0.1, -0.05]]))
+    lp = L.FrequencyModel(robot, L.Structure(lm.structure.springs, n), "tool")
+    rng = np.random.default_rng(3)
+    x = _x(rng, lm)
+    th = L.payload_start(n, 1.5, (0.02, -0.03, 0.05), r=0.03)
+    if n == 10:
+        th[4:] += [0.2, -0.1, 0.3, 0.01, -0.02, 0.005]
+    x = np.r_[x[:14], th, x[15:]]
+    q0, freq = np.array([0.3, 0.8, -1.1]), np.array([5.0, 20.0, 40.0, 90.0])
+    # the basis: the linearisation's change with each of the link's 10 inertial parameters
+    qa = lp.posture(q0)
+    dM, dK = lp._payload_basis(qa)
+    M0, K0 = lp._linearization(lp.aug, qa)
+    link = lp.aug.link_names[lp._payload_frame()[0]]
+    for i in range(10):
+        M1, K1 = lp._linearization(jflex.effects.Payload(np.eye(10)[i], link=link).modify_robot(lp.aug), qa)
+        np.testing.assert_allclose(M1 - M0, dM[:, :, i], atol=1e-12)
+        np.testing.assert_allclose(K1 - K0, dK[:, :, i], atol=1e-12)
+    _, dH = lp.frf_jacobian(x, q0, freq)
+    for p in range(14, 14 + n):
+        e = np.zeros_like(x)
+        e[p] = 1e-6
+        fd = (lp.frf(x + e, q0, freq) - lp.frf(x - e, q0, freq)) / 2e-6
+        np.testing.assert_allclose(dH[p], fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
+    # reported in the tool frame: mass, centre of mass, inertia about it; a physical body
+    from jflex.identify import is_consistent
+
+    pp = lp.payload_parameters(x)
+    assert pp["mass [kg]"] == pytest.approx(1.5, rel=1e-12) and pp["parameters"] == n
+    np.testing.assert_allclose(pp["com (tool frame) [m]"], [0.02, -0.03, 0.05], atol=1e-12)
+    assert is_consistent(pp["inertial parameters (link frame)"])
+    if n == 4:  # a point mass: no inertia of its own
+        np.testing.assert_allclose(pp["inertia about com (tool axes) [kg m^2]"], 0.0, atol=1e-15)

@@ -123,7 +123,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     gap0, fl, exc0 = gap_summary(ev0, floor)
     for c in keep:
         st, ev = fitted[c]
-        score = -ic_delta(ev, ev0, n_params(c, pb.user, bool(pb.ttrain)))
+        score = -ic_delta(ev, ev0, n_params(c, pb.user, bool(pb.ttrain), pb))
         ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c)))
         say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
     significant = is_significant(ev0, floor) or decisive(ranking)
@@ -164,7 +164,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         simulated[pb.names[j]] = dict(gap_screened=gap_summary(step.ev, floor)[0], gap_identified=gap_summary(ev, floor)[0])
         return st, ev
 
-    sel = forward_select(nom, ev0, floor, pool, refit, refine=refine, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain)), max_effects=max_effects if keep else 0,
+    sel = forward_select(nom, ev0, floor, pool, refit, refine=refine, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain), pb), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select, significant=significant,
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of

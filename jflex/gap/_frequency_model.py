@@ -24,7 +24,8 @@ $$ D(\\omega) = K_g - \\omega^2 M + \\operatorname{diag}_s\\big(k_s + c_s\\,\\ps
    + \\text{couplings}, \\qquad H = J D^{-1} J^T, $$
 
 ``M`` and ``K_g`` the linearisation of the rigid augmented robot, other joints held (with the
-payload's share, which is linear in its mass), ``J`` the tool Jacobian, and ``psi_s`` the damping
+payload's share, which is linear in its 10 inertial parameters: a rigid body of mass, centre of
+mass and rotational inertia, :func:`payload_inertia`), ``J`` the tool Jacobian, and ``psi_s`` the damping
 law's own complex modulus with unit loss (:func:`jflex.effects.complex_modulus` less 1: ``i w`` for
 Kelvin-Voigt, ``i`` for hysteretic, ``(i w)^alpha`` for fractional damping). ``c_s = k_s theta_s``
 is the loss stiffness, ``theta_s`` the law's loss leaf (``k_e``, ``eta``), in which every law of
@@ -241,13 +242,72 @@ def _point_mass(p):
     return np.array([1.0, x, y, z, y * y + z * z, -x * y, x * x + z * z, -x * z, -y * z, x * x + y * y])
 
 
+# --- the tool payload: a rigid body through the log-Cholesky factor of its pseudo-inertia -----------
+PAYLOAD_NAMES = ("log m", "c_x", "c_y", "c_z", "log r_1", "log r_2", "log r_3", "s_12", "s_23", "s_13")
+PAYLOAD_COM_BOX = 0.25  # [m] the payload's centre of mass stays this close to the tool frame's origin (per axis)
+# where each parameter sits in the factor B (4, 4) of the tool-frame pseudo-inertia (below)
+_B_AT = {1: (0, 3), 2: (1, 3), 3: (2, 3), 4: (0, 0), 5: (1, 1), 6: (2, 2), 7: (0, 1), 8: (1, 2), 9: (0, 2)}
+
+
+def _pseudo_to_params(J):
+    """The 10 inertial parameters (Pinocchio's order ``[m, m c, I about the origin]``) of a
+    pseudo-inertia ``J = [[Sigma, h], [h^T, m]]`` (..., 4, 4): linear in ``J``."""
+    S = J[..., :3, :3]
+    tr = S[..., 0, 0] + S[..., 1, 1] + S[..., 2, 2]
+    return np.stack([J[..., 3, 3], J[..., 0, 3], J[..., 1, 3], J[..., 2, 3], tr - S[..., 0, 0], -S[..., 0, 1],
+                     tr - S[..., 1, 1], -S[..., 0, 2], -S[..., 1, 2], tr - S[..., 2, 2]], axis=-1)
+
+
+def payload_inertia(theta, T=None, jac: bool = False):
+    """The payload's 10 inertial parameters about the body frame of its link, from its parameters
+    ``theta`` (1, 4 or 10 of :data:`PAYLOAD_NAMES`, in the tool frame ``T`` (4, 4): the tool frame's
+    pose in the link's frame); with ``jac``, also their derivatives (len(theta), 10).
+
+    The pseudo-inertia about the tool frame is ``J = A A^T``, ``A = sqrt(m) B``,
+    ``B = [[U, c], [0, 1]]``, ``U`` upper triangular with diagonal ``exp(log r_i)`` and off-diagonal
+    ``s_ij``: ``m = e^{log m}``, ``c`` the centre of mass [m] in tool axes and ``m U U^T`` the second
+    moment about it (the log-Cholesky parametrisation of :func:`jflex.identify.log_cholesky_to_inertia`,
+    its ``alpha`` = ``log m / 2``, ``d_i`` = ``log r_i``, ``t`` = ``c``): every value is a physical body
+    (positive mass, triangle inequalities). Fewer parameters fix the rest: 1, a point mass at the tool
+    frame's origin; 4, a point mass at ``c``. In the link's frame ``J' = T J T^T``."""
+    th = np.clip(np.asarray(theta, float), -60.0, 60.0)
+    P = th.size
+    B = np.zeros((4, 4))
+    B[3, 3] = 1.0
+    for i in range(1, P):
+        r, col = _B_AT[i]
+        B[r, col] = np.exp(th[i]) if 4 <= i <= 6 else th[i]
+    T = np.eye(4) if T is None else np.asarray(T, float)
+    sm = np.exp(0.5 * th[0])
+    A = sm * (T @ B)
+    pi = _pseudo_to_params(A @ A.T)
+    if not jac:
+        return pi
+    dA = np.zeros((P, 4, 4))
+    dA[0] = 0.5 * A
+    for i in range(1, P):
+        r, col = _B_AT[i]
+        E = np.zeros((4, 4))
+        E[r, col] = B[r, col] if 4 <= i <= 6 else 1.0
+        dA[i] = sm * (T @ E)
+    dJ = dA @ A.T
+    return pi, _pseudo_to_params(dJ + np.swapaxes(dJ, 1, 2))
+
+
+def payload_start(n: int, m: float, com=(0.0, 0.0, 0.0), r: float = 0.02) -> np.ndarray:
+    """Payload parameters (``n`` of :data:`PAYLOAD_NAMES`): mass ``m`` [kg] at ``com`` [m] (tool
+    axes), its inertia about it that of a solid sphere of radius ``r sqrt(5/2)`` [m]."""
+    full = np.r_[np.log(m), com, np.log([r, r, r]), 0.0, 0.0, 0.0]
+    return full[:n]
+
+
 @dataclasses.dataclass
 class PostureMats:
     M: np.ndarray
     Kg: np.ndarray
     J: np.ndarray
-    dM: np.ndarray | None
-    dKg: np.ndarray | None
+    dM: np.ndarray | None  # (S, S, 10): M's derivative in the payload's 10 inertial parameters
+    dKg: np.ndarray | None  # (S, S, 10): K_g's
     # derived, law-independent arrays a fit asks for again and again (per frequency grid): see
     # FrequencyModel._grid; and whether every matrix is exactly symmetric (then D is too, and
     # D^T's solve is D's)
@@ -262,10 +322,12 @@ class PostureMats:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Structure:
-    """Elastic sites and their laws, plus an optional tool payload."""
+    """Elastic sites and their laws, plus an optional tool payload: ``payload`` its number of
+    parameters (0: none; 1, 4 or 10 of :data:`PAYLOAD_NAMES`: see :func:`payload_inertia`; ``True``
+    is 1, a point mass at the tool)."""
 
     springs: tuple
-    payload: bool = False
+    payload: int = 0
 
     def pairs(self) -> list:
         """``[(a, b)]`` site indices of the coupled virtual pairs (``b`` the coupled axis-1 site)."""
@@ -302,8 +364,8 @@ def _elastic_linearization(rob, qa, coord: tuple):
 
 class FrequencyModel:
     """FRFs and modes of a :class:`Structure` at postures, parameters in log form:
-    ``[log k_s, log c_s for each site, log m_payload, atanh r of each coupled pair]``
-    (``c_s = k_s theta_s`` the loss stiffness of the site's law)."""
+    ``[log k_s, log c_s for each site, the payload's (:data:`PAYLOAD_NAMES`), atanh r of each coupled
+    pair]`` (``c_s = k_s theta_s`` the loss stiffness of the site's law)."""
 
     def __init__(self, robot, structure: Structure, tool_frame):
         self.robot, self.structure, self.tool = robot, structure, tool_frame
@@ -317,11 +379,33 @@ class FrequencyModel:
     def _tool(self):
         return self.tool if self.tool is not None else self.aug.link_names[-1]
 
-    def _payload_params(self):
-        """(body index, unit point-mass parameters) of the tool payload."""
+    def _payload_frame(self):
+        """(body index, the tool frame's pose (4, 4) in the body's frame) of the tool payload."""
         body, k = self.aug.frame_index(self._tool())
-        p = np.zeros(3) if k < 0 else np.asarray(self.aug.frame_p[k])
-        return body, _point_mass(p)
+        T = np.eye(4)
+        if k >= 0:
+            T[:3, :3], T[:3, 3] = np.asarray(self.aug.frame_R[k]), np.asarray(self.aug.frame_p[k])
+        return body, T
+
+    def _n_payload(self) -> int:
+        return int(self.structure.payload)
+
+    def payload_parameters(self, x) -> dict:
+        """The fitted payload in the tool frame: mass [kg], centre of mass [m], inertia about it
+        [kg m^2] (Pinocchio's order ``Ixx, Ixy, Iyy, Ixz, Iyz, Izz``), and its 10 inertial parameters
+        about the link's frame."""
+        P = self._n_payload()
+        th = np.asarray(x, float)[2 * len(self.structure.springs):][:P]
+        pt = payload_inertia(th)  # about the tool frame
+        m = float(pt[0])
+        c = pt[1:4] / m
+        I0 = np.array([[pt[4], pt[5], pt[7]], [pt[5], pt[6], pt[8]], [pt[7], pt[8], pt[9]]])
+        Ic = I0 - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+        body, T = self._payload_frame()
+        return {"mass [kg]": m, "com (tool frame) [m]": [float(v) for v in c],
+                "inertia about com (tool axes) [kg m^2]": [float(Ic[i, j]) for i, j in ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))],
+                "parameters": P, "link": self.aug.link_names[body],
+                "inertial parameters (link frame)": [float(v) for v in payload_inertia(th, T)]}
 
     def posture(self, q0) -> np.ndarray:
         """The augmented robot's coordinates at the model posture ``q0`` (virtual joints at 0)."""
@@ -350,13 +434,38 @@ class FrequencyModel:
         J = np.asarray(jacobian(self.aug, jnp.asarray(qa), self._tool(), "local_world_aligned"))[:3][:, self.coord]
         dM = dKg = None
         if self.structure.payload:
-            # the payload effect of a unit mass: its share of M and K_g (both linear in the mass)
-            body, unit = self._payload_params()
-            M1, K1 = self._linearization(Payload(unit, link=self.aug.link_names[body]).modify_robot(self.aug), qa)
-            dM, dKg = M1 - M, K1 - Kg
+            dM, dKg = self._payload_basis(qa)
         out = PostureMats(M, Kg, J, dM, dKg)
         self._cache[key] = self._cache[fast] = out
         return out
+
+    def _payload_basis(self, qa):
+        """The payload's share of ``M`` and ``K_g``, both linear in its 10 inertial parameters ``pi``
+        (about its link's frame): their derivatives in them (S, S, 10). ``M``'s is ``J_b^T
+        Lambda(pi) J_b``, ``J_b`` the link's Jacobian in its own frame and ``Lambda`` the spatial
+        inertia; ``K_g``'s (mass and first moment only) the gravity stiffness of the payload alone
+        (a forward-mode derivative of the linearisation in ``pi`` costs ~30 times more, outside
+        ``jit``)."""
+        body = self._payload_frame()[0]
+        coord = np.asarray(self.coord)
+        Jb = np.asarray(jacobian(self.aug, jnp.asarray(qa), body, "local"))[:, coord]  # (6, S): [v; w]
+        S = coord.size
+        dM = np.zeros((S, S, 10))
+        for i in range(10):
+            e = np.zeros(10)
+            e[i] = 1.0
+            h = e[1:4]
+            hx = np.array([[0.0, -h[2], h[1]], [h[2], 0.0, -h[0]], [-h[1], h[0], 0.0]])
+            Io = np.array([[e[4], e[5], e[7]], [e[5], e[6], e[8]], [e[7], e[8], e[9]]])
+            Lam = np.block([[e[0] * np.eye(3), -hx], [hx, Io]])
+            dM[:, :, i] = Jb.T @ Lam @ Jb
+        dKg = np.zeros((S, S, 10))
+        ix = np.ix_(coord, coord)
+        for i in range(4):
+            inert = np.zeros(np.shape(self.aug.inertia))
+            inert[body, i] = 1.0
+            dKg[:, :, i] = np.asarray(gravity_stiffness(self.aug.replace(inertia=inert), jnp.asarray(qa)))[ix]
+        return dM, dKg
 
     def _split(self, x):
         x = np.asarray(x, float)
@@ -366,13 +475,44 @@ class FrequencyModel:
             return last[1]  # a fit evaluates every posture and data set at one x
         S = len(self.structure.springs)
         xc = np.clip(x, -60.0, 60.0)  # log parameters: keep exp() finite while the solver explores
-        out = (np.exp(xc[:S]), np.exp(xc[S:2 * S]), np.exp(xc[2 * S]) if self.structure.payload else 0.0)
+        # the payload's 10 inertial parameters about its link's frame (None: no payload)
+        P = self._n_payload()
+        pi = payload_inertia(x[2 * S:2 * S + P], self._payload_frame()[1]) if P else None
+        out = (np.exp(xc[:S]), np.exp(xc[S:2 * S]), pi)
         self._last_split = (xb, out)
         return out
 
+    def widths(self) -> np.ndarray:
+        """Half-width of each parameter's box about a fit's start (:func:`fit_linear`): a factor
+        ``e^3`` for stiffnesses, couplings and the payload's mass, ``e^4`` for damping; NaN for the
+        parameters held in a fixed box (:meth:`absolute_bounds`)."""
+        S = len(self.structure.springs)
+        P = self._n_payload()
+        w = np.full(2 * S + P + len(self.pairs), 3.0)
+        w[S:2 * S] = 4.0
+        w[2 * S + 1:2 * S + P] = np.nan
+        return w
+
+    def absolute_bounds(self):
+        """``(lo, hi)`` of the parameters held in a fixed box whatever a fit's start (NaN for the
+        rest): the payload's centre of mass within :data:`PAYLOAD_COM_BOX` of the tool frame's
+        origin, and the factor of its second moment (radii of gyration from 2 mm to that box, its
+        off-diagonal terms within it). (Boxes about the start let a light payload's centre of mass
+        walk away with each refit of a later candidate: 0.7 m out on the independent link-bending
+        case.)"""
+        S = len(self.structure.springs)
+        P = self._n_payload()
+        lo = np.full(2 * S + P + len(self.pairs), np.nan)
+        hi = lo.copy()
+        o = 2 * S
+        B = PAYLOAD_COM_BOX
+        for i in range(1, P):
+            lo[o + i], hi[o + i] = (np.log(0.002), np.log(B)) if 4 <= i <= 6 else (-B, B)
+        return lo, hi
+
     def coupling(self, x):
         """``r`` (in (-1, 1)) of each coupled pair."""
-        o = 2 * len(self.structure.springs) + int(self.structure.payload)
+        o = 2 * len(self.structure.springs) + self._n_payload()
         return np.tanh(np.asarray(x, float)[o:o + len(self.pairs)])
 
     def stiffness_matrix(self, x) -> np.ndarray:
@@ -388,15 +528,14 @@ class FrequencyModel:
         springs (:class:`jflex.effects.Spring`), each site's law on its own stiffness
         (:class:`jflex.effects.StructuralDamping`) and the payload (:class:`jflex.effects.Payload`).
         Hold :attr:`held` to analyse it as the diagnosis does."""
-        k, c, m = self._split(x)
+        k, c, pi = self._split(x)
         names = list(self.aug.joint_names)
         effects = [Spring([names[i] for i in self.coord], self.stiffness_matrix(x))]
         for i, s in enumerate(self.structure.springs):
             effects.append(StructuralDamping(jnp.array([[k[i]]]), with_loss(s.law, c[i] / k[i]), coords=(int(self.coord[i]),),
                                              name=f"site{i}"))
         if self.structure.payload:
-            body, unit = self._payload_params()
-            effects.append(Payload(m * unit, link=self.aug.link_names[body]))
+            effects.append(Payload(pi, link=self.aug.link_names[self._payload_frame()[0]]))
         return Model(self.aug, effects)
 
     def _psi(self, w, tabulated: bool = False):
@@ -419,10 +558,10 @@ class FrequencyModel:
     def _static(self, x, P: PostureMats):
         """``(K_0, M)`` at ``x``: the frequency-independent stiffness (``K_g`` with the payload's
         share, the pairs' couplings) and the mass matrix."""
-        k, c, m = self._split(x)
+        k, c, pi = self._split(x)
         M, Kg = P.M, P.Kg
-        if P.dM is not None and m:
-            M, Kg = M + m * P.dM, Kg + m * P.dKg
+        if P.dM is not None and pi is not None:
+            M, Kg = M + P.dM @ pi, Kg + P.dKg @ pi
         K0 = np.array(Kg, float)
         for (a, b), r in zip(self.pairs, self.coupling(x)):
             K0[a, b] += r * np.sqrt(k[a] * k[b])
@@ -448,7 +587,7 @@ class FrequencyModel:
     def stiffness(self, x, P: PostureMats, omega, tabulated: bool = False):
         """Dynamic stiffness (F, S, S) at angular frequencies ``omega`` (F,) (``tabulated``: see
         :func:`unit_loss`)."""
-        k, c, m = self._split(x)
+        k, c, _ = self._split(x)
         K0, M = self._static(x, P)
         w = np.asarray(omega, float)
         S = len(k)
@@ -500,7 +639,7 @@ class FrequencyModel:
         D, G, H = self._solve(x, P, w)  # G = D^-1 J^T (F, S, 3)
         # (J D^-1)^T: D's own solve when D is symmetric (its matrices are)
         Lt = G if P.symmetric() else np.linalg.solve(np.swapaxes(D, 1, 2), self._jt(P, w.size))
-        k, c, m = self._split(x)
+        k, c, _ = self._split(x)
         live = np.abs(x) < 60.0  # _split clips there: no derivative beyond
         dH = np.zeros((x.size, w.size, 3, 3), complex)
 
@@ -512,9 +651,14 @@ class FrequencyModel:
             dH[S:2 * S] = (-(c * psi).T)[:, :, None, None] * LtT * GT
         o = 2 * S
         if self.structure.payload:
-            dD = m * (P.dKg[None] - w[:, None, None] ** 2 * P.dM[None])
-            dH[o] = -np.einsum("fsi,fst,ftj->fij", Lt, dD, G)
-            o += 1
+            # dD / d theta_p = (dK_g - w^2 dM) . d pi / d theta_p
+            npl = self._n_payload()
+            _, dpi = payload_inertia(x[o:o + npl], self._payload_frame()[1], jac=True)
+            for p_, dp in enumerate(dpi):
+                dK, dMp = P.dKg @ dp, P.dM @ dp
+                dD = dK[None] - w[:, None, None] ** 2 * dMp[None]
+                dH[o + p_] = -np.einsum("fsi,fst,ftj->fij", Lt, dD, G)
+            o += npl
         for q, ((a, b), r) in enumerate(zip(self.pairs, self.coupling(x))):
             # dD = v (F,) at (a, b) and (b, a): dH = -v J D^-1 (e_a e_b^T + e_b e_a^T) D^-1 J^T
             X = Lt[:, a, :, None] * G[:, b, None, :] + Lt[:, b, :, None] * G[:, a, None, :]
@@ -786,13 +930,17 @@ def fit_linear(lm: FrequencyModel, x0, train, free=None, starts=(), peaks_first:
             if not free.any():
                 break
             # log parameters stay within a factor e^3 (stiffness) / e^4 (damping) of the start: the
-            # FRF misfit has spurious minima at vanishing or huge damping
-            width = np.where(np.arange(len(xs))[free] % (2 * len(lm.structure.springs) or 1) < len(lm.structure.springs), 3.0, 4.0)
+            # FRF misfit has spurious minima at vanishing or huge damping (FrequencyModel.widths)
+            width = lm.widths()[free]
+            alo, ahi = (b[free] for b in lm.absolute_bounds())
+            fixed = np.isfinite(alo)
             # lsmr: no dense SVD of the Jacobian per step (that SVD dominated, and stalls when BLAS
             # threads contend for shared cores)
             centre = u0
             for _ in range(1 + (0 if peaks_only else RECENTRE)):
                 lo, hi = centre - width, centre + width
+                if fixed.any():
+                    lo, hi = np.where(fixed, alo, lo), np.where(fixed, ahi, hi)
                 # (lsmr's 2-D subspace step fails on a single free parameter: exact there)
                 sol = so.least_squares(fun, np.clip(xs[free], lo, hi), jac=jac if exact else "2-point", method="trf",
                                        bounds=(lo, hi), tr_solver="lsmr" if free.sum() > 1 else "exact",

@@ -99,9 +99,12 @@ def payload_summary(params: dict, robot, tool_frame) -> dict | None:
                 c, frame = R.T @ (c_link - pos), f"tool frame '{tool_frame}'"
         return dict(mass_kg=m, com_m=c.tolist(), frame=frame, side="torque data (10 inertial parameters fitted)")
     if "payload" in params.get("linear", {}):
-        m = float(params["linear"]["payload"]["mass [kg]"])
-        return dict(mass_kg=m, com_m=[0.0, 0.0, 0.0], frame=f"tool frame '{tool_frame}'",
-                    side="FRF/modal data (a point mass at the tool frame's origin)")
+        p = params["linear"]["payload"]
+        m = float(p["mass [kg]"])
+        com = [float(v) for v in p.get("com (tool frame) [m]", (0.0, 0.0, 0.0))]
+        what = {1: "a point mass at the tool frame's origin", 4: "a point mass: its mass and centre of mass"}.get(
+            int(p.get("parameters", 1)), "a rigid body: its mass, centre of mass and rotational inertia")
+        return dict(mass_kg=m, com_m=com, frame=f"tool frame '{tool_frame}'", side=f"FRF/modal data ({what})")
     return None
 
 

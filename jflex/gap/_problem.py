@@ -433,7 +433,7 @@ def parameters(pb: Problem, st: State) -> dict:
                 if type(s.law).shape:
                     lin[nm][type(s.law).shape[0]] = float(getattr(s.law, type(s.law).shape[0]))
         if st.lm.structure.payload:
-            lin["payload"] = {"mass [kg]": float(np.exp(st.x[2 * S]))}
+            lin["payload"] = st.lm.payload_parameters(st.x)
         for (a, b), r in zip(st.lm.pairs, st.lm.coupling(st.x)):
             nm = {"orth": f"{pb.names[sp[b].where]}_orth", "link": f"{pb.robot.link_names[sp[b].where]}_bend"}[sp[b].kind]
             lin[nm + "_coupling"] = {"r = k_ab / sqrt(k_a k_b)": float(r)}

@@ -12,16 +12,19 @@ from ._frequency_kinds import frequency_kinds
 from ._torque_terms import KINDS, make_term
 
 
-def n_params(c: Candidate, user=None, torque: bool = True) -> int:
+def n_params(c: Candidate, user=None, torque: bool = True, problem: Problem | None = None) -> int:
     """Parameters ``c`` adds (its kind's count, searched hyper-parameters included): the torque
     side's when there are torque data (a payload's 10 inertial parameters), else the frequency
-    side's (a payload's one mass)."""
+    side's on ``problem``'s training data (a payload's mass and centre of mass on FRFs, its mass on
+    modal tables alone: :class:`._frequency_kinds.ToolPayload`)."""
     if user and c in user:
         return user[c].size
     if torque and c.effect in KINDS:
         return KINDS[c.effect].n_params
     kind = frequency_kinds().get(c.effect)
-    return kind.n_params if kind is not None else KINDS[c.effect].n_params
+    if kind is None:
+        return KINDS[c.effect].n_params
+    return kind.params(problem) if problem is not None else kind.n_params
 
 
 def signatures(problem: Problem, state: State, cands) -> dict:
