@@ -311,28 +311,112 @@ def _unit_axis(S):
     return None
 
 
-def _congruence(R: s.M33, p: s.V3, Ia):
+def _signed_permutation(R: s.M33):
+    """[(k, sign)] per row when the known rotation R is a signed permutation (R[i][k_i] = sign_i,
+    the row's only nonzero entry): axes swapped and flipped, as URDF rpy of multiples of pi/2
+    and DH twists of 0 and +-pi/2 give; else None."""
+    out = []
+    for row in R.r:
+        nz = [(k, x) for k, x in enumerate(row) if not s._is(x, 0.0)]
+        if len(nz) != 1 or not (s._is(nz[0][1], 1.0) or s._is(nz[0][1], -1.0)):
+            return None
+        out.append(nz[0])
+    return out
+
+
+def _z_rotation(robot, c, i, qi):
+    """(signed permutation of the placement, cos, sin) when body i sits at R = Rpl Rz(+-q_i) with
+    Rpl a signed permutation (see :func:`_signed_permutation`), else None."""
+    ax = c.axis[i]
+    if robot.joint_types[i] == PRISMATIC or not (s._is(ax.x, 0.0) and s._is(ax.y, 0.0)):
+        return None
+    if not (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
+        return None
+    perm = _signed_permutation(c.Rpl[i])
+    if perm is None:
+        return None
+    cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi), fence=c.fence)
+    return perm, cs, sn
+
+
+def _rotate_z(M, c, sn, cs, ss, sym):
+    """Rz M Rz^T for a 3x3 M, Rz the rotation about z with cosine c and sine sn (cs = c sn,
+    ss = sn^2). The upper-left 2x2 block by the double-angle form: with d = M00 - M11 and
+    e = M01 + M10, M00 -= t, M11 += t with t = ss d + cs e, and both off-diagonal entries += cs d - ss e
+    (its trace and antisymmetric part are invariant); the third row and column as plane rotations."""
+    a, b, e, d = M[0][0], M[0][1], M[1][0], M[1][1]
+    dl, sg = s.sub(a, d), s.add(b, e)
+    t = s.add(s.mul(ss, dl), s.mul(cs, sg))
+    v = s.sub(s.mul(cs, dl), s.mul(ss, sg))
+    b2 = s.add(b, v)
+    e2 = b2 if sym else s.add(e, v)
+    rot = lambda x, y: (s.sub(s.mul(c, x), s.mul(sn, y)), s.add(s.mul(sn, x), s.mul(c, y)))
+    col = rot(M[0][2], M[1][2])
+    row = col if sym else rot(M[2][0], M[2][1])
+    return [[s.sub(a, t), b2, col[0]], [e2, s.add(d, t), col[1]], [row[0], row[1], M[2][2]]]
+
+
+def _value(e):
+    """The scalar of a (sign, value) entry."""
+    return e[1] if e[0] == 1.0 else s.mul(-1.0, e[1])
+
+
+def _comb(terms):
+    """sum of k g v over terms (k, g, v): k a scalar, g = +-1.0, v a scalar; returned as (sign,
+    value), a sum of negative terms only as (-1.0, its negation), so that signs the signed
+    permutations bring pass to the next consumer instead of costing a negation each."""
+    const, pos, neg = 0.0, [], []
+    for k, g, v in terms:
+        if s._is(k, 0.0) or s._is(v, 0.0):
+            continue
+        if isinstance(k, float):
+            a = k * g
+        else:
+            a, v = g, s.mul(k, v)
+        if isinstance(v, float):
+            const += a * v
+        elif a > 0:
+            pos.append(s.mul(a, v))
+        else:
+            neg.append(s.mul(-a, v))
+    if not pos and neg and const == 0.0:
+        return -1.0, s.sum_(*neg)
+    out = s.add(s.sum_(*pos), const)
+    for x in neg:
+        out = s.sub(out, x)
+    return 1.0, out
+
+
+def _congruence(R: s.M33, p: s.V3, Ia, rz=None):
     """X^T Ia X for symmetric Ia and the motion transform X = [[R^T, 0], [-R^T [p]x, R^T]] of a
-    body at (R, p) in its parent, in 3x3 blocks: with Ia = [[A, B], [B^T, C]], rotate each block
-    (A1 = R A R^T, ...), then shift: [[A1 + P B1^T - B2 P, B2], [B2^T, C1]], B2 = B1 + P C1,
-    P = [p]x (p is a trace-time constant for a revolute joint). Two dense 6x6 products cost
-    about 2.5x the operations."""
-    Rr = [list(row) for row in R.r]
+    body at (R, p) in its parent, in 3x3 blocks, as (sign, value) entries (see :func:`_comb`):
+    with Ia = [[A, B], [B^T, C]], rotate each block (A1 = R A R^T, ...), then shift:
+    [[A1 + P B1^T - B2 P, B2], [B2^T, C1]], B2 = B1 + P C1, P = [p]x (p is a trace-time
+    constant for a revolute joint). Two dense 6x6 products cost about 2.5x the operations.
+    ``rz``: :func:`_z_rotation`'s (permutation, cos, sin): R = Rpl Rz(q) is applied as Rz in the
+    double-angle form, then Rpl as a relabelling with signs."""
     blk = lambda r0, c0: [[Ia[r0 + r][c0 + c] for c in range(3)] for r in range(3)]
     A, B, C = blk(0, 0), blk(0, 3), blk(3, 3)
+    if rz is None:
+        Rr = [list(row) for row in R.r]
 
-    def left(M):  # R M
-        return [[s.signed_sum((Rr[i][k], M[k][j]) for k in range(3)) for j in range(3)] for i in range(3)]
+        def rotate(M, sym):  # R M R^T (upper triangle mirrored when sym)
+            RM = [[s.signed_sum((Rr[i][k], M[k][j]) for k in range(3)) for j in range(3)] for i in range(3)]
+            e = lambda i, j: (1.0, s.signed_sum((RM[i][k], Rr[j][k]) for k in range(3)))
+            return _sym6(e, 3) if sym else [[e(i, j) for j in range(3)] for i in range(3)]
+    else:
+        perm, c, sn = rz
+        cs, ss = s.mul(c, sn), s.mul(sn, sn)
 
-    def right(M, sym):  # M R^T (upper triangle mirrored when sym)
-        e = lambda i, j: s.signed_sum((M[i][k], Rr[j][k]) for k in range(3))
-        return _sym6(e, 3) if sym else [[e(i, j) for j in range(3)] for i in range(3)]
-
-    A1, B1, C1 = right(left(A), True), right(left(B), False), right(left(C), True)
+        def rotate(M, sym):
+            M1 = _rotate_z(M, c, sn, cs, ss, sym)
+            return [[(gi * gj, M1[ki][kj]) for kj, gj in perm] for ki, gi in perm]
+    A1, B1, C1 = rotate(A, True), rotate(B, False), rotate(C, True)
     P = [list(row) for row in s.skew(p).r]
-    B2 = [[s.add(B1[i][j], s.signed_sum((P[i][k], C1[k][j]) for k in range(3))) for j in range(3)] for i in range(3)]
-    A2 = _sym6(lambda i, j: s.sub(s.add(A1[i][j], s.signed_sum((P[i][k], B1[j][k]) for k in range(3))),
-                                  s.signed_sum((B2[i][k], P[k][j]) for k in range(3))), 3)
+    B2 = [[_comb([(1.0, *B1[i][j])] + [(P[i][k], *C1[k][j]) for k in range(3)]) for j in range(3)] for i in range(3)]
+    # -P[k][j] = P[j][k]
+    A2 = _sym6(lambda i, j: _comb([(1.0, *A1[i][j])] + [(P[i][k], *B1[j][k]) for k in range(3)]
+                                  + [(P[j][k], *B2[i][k]) for k in range(3)]), 3)
     return [A2[r] + B2[r] for r in range(3)] + [[B2[c][r] for c in range(3)] + C1[r] for r in range(3)]
 
 
@@ -425,8 +509,8 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
             Iac = _mv6(Ia, cc[i])
             pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
             Ia, pa = _barrier6(c.fence, Ia, pa)
-            XtIaX = _congruence(ls.R[i], ls.p[i], Ia)
-            IA[par] = _sym6(lambda r, j: s.add(IA[par][r][j], XtIaX[r][j]))
+            XtIaX = _congruence(ls.R[i], ls.p[i], Ia, _z_rotation(robot, c, i, q[i]))
+            IA[par] = _sym6(lambda r, j: _value(_comb([(1.0, 1.0, IA[par][r][j]), (1.0, *XtIaX[r][j])])))
             fw, fv = s.force_to_parent(ls.R[i], ls.p[i], s.V3(*pa[:3]), s.V3(*pa[3:]))
             pA[par] = [s.add(a, b) for a, b in zip(pA[par], _v6(fw, fv))]
             IA[par], pA[par] = _barrier6(c.fence, IA[par], pA[par])
