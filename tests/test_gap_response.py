@@ -184,3 +184,26 @@ def test_failed_solves_are_recorded(tmp_path):
     r = diagnose(folder, max_effects=0, prune=0).result
     assert r["noise_floor_source"] == {"tip1": "y_repeats"}
     assert 1.6 * expected < r["noise_floor"] < 2.4 * expected
+
+
+def test_simulated_spring_with_play_rests_where_it_holds_gravity():
+    """A simulated spring ``(k, c, I_m, b)`` carries play (:class:`jflex.effects.FlexibleJoints`
+    ``play``, the other springs without); its rest deflection (:func:`._response.rest_deflection`,
+    used by :func:`._response.rest_coords`) is ``b`` past the play plus ``tau / k``, where the
+    transmission passes the link's gravity torque. Without play the model is today's (``play`` None)."""
+    inert = [{"mass": 3.0, "com": [0.25, 0.02, 0.0], "inertia": [0.1, 0.0, 0.2, 0.0, 0.0, 0.25]}] * 2
+    robot = jflex.from_dh([[0.0, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0]], tool=[0.0, 0.5, 0.0, 0.0], inertias=inert,
+                          gravity=(0.0, -9.81, 0.0))
+    k, b = np.array([3e3, 2e3]), np.array([0.0, 0.004])
+    assert R.simulation_model(robot, None, {0: (k[0], 1.0, 0.02), 1: (k[1], 1.0, 0.01)}, None).effects[-1].play is None
+    model = R.simulation_model(robot, None, {0: (k[0], 1.0, 0.02), 1: (k[1], 1.0, 0.01, b[1])}, None)
+    fj = model.effects[-1]
+    assert np.allclose(fj.play, b) and float(fj.play_smoothing) == R.PLAY_SMOOTHING
+    q0 = np.array([0.4, -0.3])
+    g = np.asarray(jflex.gravity(robot, q0))
+    d = R.rest_deflection(g, k, b, R.PLAY_SMOOTHING)
+    assert d[0] == g[0] / k[0]  # no play there: exactly tau / k
+    assert d[1] == pytest.approx(g[1] / k[1] + np.sign(g[1]) * b[1], rel=1e-3)
+    x = jnp.asarray(np.concatenate([q0, q0 + d]))
+    held = np.asarray(fj.spring_torque(model.rigid, model.layout.slots[-1], x, jnp.zeros(4)))
+    assert np.allclose(held, g, rtol=1e-9, atol=0)

@@ -15,7 +15,7 @@ from ._effect_term import EffectCandidate, EffectTerm
 from ._frequency_kinds import frequency_kinds, law_candidates
 from ._frequency_inertia import refit_linear_inertia, shifted
 from ._noise import fits_to_noise
-from ._simulated import BASINS, polish_spring, scan_spring
+from ._simulated import BASINS, polish_spring, scan_play, scan_spring
 from ._inertia import inertia_prior
 from . import _frequency_model as L
 from . import _response as R
@@ -23,7 +23,9 @@ from . import _torque as T
 from ._torque_terms import KINDS, make_term
 
 TORQUE_EFFECTS = tuple(KINDS)
-SIMULATED_EFFECTS = ("joint_flexibility",)  # refitted through jflex.simulate on output-error training records
+# refitted through jflex.simulate on output-error training records; backlash there is play inside a
+# spring the simulation holds (the torque side's backlash, on torque records, is its own term)
+SIMULATED_EFFECTS = ("joint_flexibility", "backlash")
 # pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
 CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
                                      ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
@@ -245,7 +247,9 @@ class Problem:
             out += [Candidate(name, None) for name, k in kinds.items() if not k.per_joint and k.tried_at(self, None, flex)]
         if self.rtrain and self.rval:
             flex = {s.where for s in self._nominal_springs()}
-            out += [Candidate(e, j) for e in SIMULATED_EFFECTS for j in range(self.n) if j not in flex]
+            out += [Candidate("joint_flexibility", j) for j in range(self.n) if j not in flex]
+            # play inside a spring: tried at every joint, a no-op until a spring is placed there
+            out += [Candidate("backlash", j) for j in range(self.n) if ("backlash", j) not in self.nominal]
         return list(dict.fromkeys(out))
 
     def _nominal_springs(self):
@@ -264,7 +268,18 @@ class Problem:
         if kind is not None and self.ftrain and lm is not None:
             lm, x = kind.add(self, lm, x, cand.joint)
         springs = state.springs
-        if cand.effect in SIMULATED_EFFECTS and self.rtrain and not (self.ftrain and lm is not None):
+        if cand.effect == "backlash" and self.rtrain and self.rval and not (self.ftrain and lm is not None):
+            # play inside the spring the simulation holds at the joint (none there yet: nothing to add)
+            held = State(tfit, lm, x, state.added, springs)
+            sp = self.sim_springs(held)
+            if cand.joint in sp:
+                found = scan_play(self.robot, tfit, sp, self._rotor(), cand.joint, self.rtrain)
+                springs = tuple((j, v) for j, v in springs if j != cand.joint) + ((cand.joint, found[0]),)
+                starts = dict(state.starts)
+                starts[cand.joint] = tuple(found)
+                return State(tfit, lm, x, state.added + (cand,), springs, tuple(starts.items()))
+            return State(tfit, lm, x, state.added + (cand,), springs, state.starts)
+        if cand.effect == "joint_flexibility" and self.rtrain and not (self.ftrain and lm is not None):
             # no FRF/modal data place the spring: the output-error training records do
             held = State(tfit, lm, x, state.added, springs)
             found = scan_spring(self.robot, tfit, self.sim_springs(held), self._rotor(), cand.joint, self.rtrain, basins=BASINS)
@@ -439,6 +454,7 @@ def parameters(pb: Problem, st: State) -> dict:
             lin[nm + "_coupling"] = {"r = k_ab / sqrt(k_a k_b)": float(r)}
         out["linear"] = lin
     if st.springs:
-        out["simulated"] = {pb.names[j]: {"stiffness [N m/rad]": k, "damping [N m s/rad]": c, "rotor inertia [kg m^2]": im}
-                            for j, (k, c, im) in st.springs}
+        out["simulated"] = {pb.names[j]: {"stiffness [N m/rad]": v[0], "damping [N m s/rad]": v[1], "rotor inertia [kg m^2]": v[2],
+                                          **({"play [rad]": v[3]} if len(v) > 3 else {})}
+                            for j, v in st.springs}
     return out

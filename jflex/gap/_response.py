@@ -9,9 +9,11 @@ the joint springs fitted on FRF/modal data (:class:`jflex.effects.FlexibleJoints
 model): the applied torque drives the motor side of a flexible joint, which carries the joint's
 rotor inertia; the spring carries it to the link. Every candidate and every step of the forward
 selection with the same set of flexible joints reuses one compiled solve. Terms that act on what
-a torque sensor or a motor encoder reads rather than on the motion (``sensor_delay``,
-``backlash``) and the virtual springs (orthogonal and link compliance) are left out of the
-simulation; see ``docs/case_format.md``.
+a torque sensor or a motor encoder reads rather than on the motion (``sensor_delay``, the
+torque side's ``backlash``) and the virtual springs (orthogonal and link compliance) are left out
+of the simulation; see ``docs/case_format.md``. Backlash inside a simulated spring (the
+output-error candidate of :mod:`._simulated`) is the spring's own ``play``
+(:class:`jflex.effects.FlexibleJoints`), its dead zone rounded over :data:`PLAY_SMOOTHING`.
 """
 
 from __future__ import annotations
@@ -26,18 +28,23 @@ from .._model import Model
 from .._simulate import simulate
 from .._model import model_inverse_dynamics, initial_state
 from ..effects import FlexibleJoints
+from ..effects._flexible_joint import smooth_dead_zone
 from .._inputs import Sampled
 from ._effect_term import FamilyCoefficients
 
 TIP_CHANNELS = {"tip_x": 0, "tip_y": 1, "tip_z": 2}  # [m] origin of the case's tool_frame, base axes
 RTOL, ATOL = 1e-7, 1e-9  # the records' noise is ~1e-4 of their spread: the solver error stays far below
 MAX_STEPS = 200_000
+PLAY_SMOOTHING = 1e-4  # [rad] rounding of a simulated spring's dead zone: a twentieth of the least play
+# the screening tries (PLAYS of ._simulated), wide enough that the adaptive solve does not crawl through each contact
 FAILED_ERROR = 10.0  # normalised error (1000 %) of samples a failed or diverged solve left non-finite
 
 
 def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     """The rigid robot plus the fitted torque terms (none when ``tfit`` is None) plus the joint
-    springs ``{joint: (k, c)}`` [N m/rad, N m s/rad] (or ``(k, c, I_m)``: with the motor's inertia [kg m^2]).
+    springs ``{joint: (k, c)}`` [N m/rad, N m s/rad] (or ``(k, c, I_m)``: with the motor's inertia [kg m^2];
+    ``(k, c, I_m, b)``: with play of half-width ``b`` [rad] inside the transmission, the other
+    springs then without play).
 
     Each term puts its own effect into the model (:meth:`._torque.TorqueTerm.contribute`): the
     laws of :mod:`jflex.effects` with the fitted coefficients, zero where a term is absent (one
@@ -68,23 +75,53 @@ def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     if flex:
         kk = np.array([springs[j][0] for j in flex], float)
         cc = np.array([springs[j][1] for j in flex], float)
-        effects.append(FlexibleJoints(jnp.asarray(kk), jnp.asarray(cc), jnp.asarray(motor), joints=flex, coupling=False))
+        play = None
+        if any(len(springs[j]) > 3 for j in flex):
+            play = jnp.asarray([float(springs[j][3]) if len(springs[j]) > 3 else 0.0 for j in flex])
+        effects.append(FlexibleJoints(jnp.asarray(kk), jnp.asarray(cc), jnp.asarray(motor), joints=flex, coupling=False,
+                                      **({} if play is None else dict(play=play, play_smoothing=PLAY_SMOOTHING))))
     return Model(robot.replace(inertia=jnp.asarray(inert)), effects)
 
 
 def rest_coords(model: Model, q0) -> np.ndarray:
     """Coordinates of the model at rest at link posture ``q0``: each spring preloaded by the
-    static joint torque (gravity less the fitted compensators), ``theta = q0 + tau_static / k``."""
+    static joint torque (gravity less the fitted compensators), ``theta = q0 + tau_static / k``
+    (with play: the deflection of the spring's dead zone that holds it, :func:`rest_deflection`)."""
     q0 = np.asarray(q0, float)
     flex = [e for e in model.effects if isinstance(e, FlexibleJoints)]
     if not flex:
         return q0
     fj = flex[0]
     idx = list(fj.joints)
-    x = jnp.asarray(np.concatenate([q0, q0[idx]]))
+    tau = static_torque(model, q0)
+    if fj.play is None:
+        return np.concatenate([q0, q0[idx] + tau[idx] / np.asarray(fj.stiffness)])
+    return np.concatenate([q0, q0[idx] + rest_deflection(tau[idx], np.asarray(fj.stiffness), np.asarray(fj.play),
+                                                         float(fj.play_smoothing))])
+
+
+def static_torque(model: Model, q0) -> np.ndarray:
+    """Joint torques (n,) holding the model's links at rest at ``q0`` (gravity less the fitted
+    compensators), the motors at the links' angles (an unloaded spring)."""
+    q0 = np.asarray(q0, float)
+    fj = next(e for e in model.effects if isinstance(e, FlexibleJoints))
+    x = jnp.asarray(np.concatenate([q0, q0[list(fj.joints)]]))
     z = jnp.zeros(x.shape[0])
-    tau = np.asarray(model_inverse_dynamics(model, 0.0, x, z, z, initial_state(model)))[: len(q0)]
-    return np.concatenate([q0, q0[idx] + tau[idx] / np.asarray(fj.stiffness)])
+    return np.asarray(model_inverse_dynamics(model, 0.0, x, z, z, initial_state(model)))[: len(q0)]
+
+
+def rest_deflection(torque, k, b, eps) -> np.ndarray:
+    """Deflection ``d`` (broadcast shape) of a spring with play at which it holds ``torque``:
+    ``k smooth_dead_zone(d, b, eps) = torque`` (:func:`jflex.effects._flexible_joint.smooth_dead_zone`,
+    monotone), by bisection on ``[tau/k - b, tau/k + b]``; exactly ``torque / k`` where ``b = 0``."""
+    y = np.asarray(torque, float) / np.asarray(k, float)
+    b = np.broadcast_to(np.asarray(b, float), y.shape)
+    lo, hi = y - b, y + b
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        above = np.asarray(smooth_dead_zone(jnp.asarray(mid), jnp.asarray(b), eps)) > y
+        hi, lo = np.where(above, mid, hi), np.where(above, lo, mid)
+    return np.where(b > 0, 0.5 * (lo + hi), y)
 
 
 @dataclasses.dataclass

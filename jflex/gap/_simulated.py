@@ -13,6 +13,15 @@ stiffness, damping (and the motor's inertia when the case does not state it) by
 Levenberg-Marquardt with exact forward-mode Jacobians, each record's motor start angle free (the
 spring's static preload follows the stiffness). A compiled Jacobian of the simulation costs about
 15 s per structure on 2 cores: one per diagnosis, not one per joint.
+
+Backlash inside a compliant transmission (the diagnosis' ``backlash`` at a joint whose spring the
+simulation holds) is the same spring with play: :class:`jflex.effects.FlexibleJoints` ``play``,
+the spring torque ``k dz(theta - q, b) + c (theta_dot - q_dot)``. It is tried once a spring is
+placed at the joint (selected, or nominal): screened on a grid of play x stiffness around the
+placed spring (:func:`scan_play`; the spring fitted without play is softer, as it averages the
+free travel into its stiffness), then identified like the spring with the play free too. A
+spring alone and a spring with play are nested: the play pays its parameter only when the free
+travel across the gap shows in the records.
 """
 
 from __future__ import annotations
@@ -34,6 +43,8 @@ BASINS = 2  # starts of the identification: the best of the scan and the best of
 OTHER_BASIN = 3.0  # ... identified only when its start's training cost is within this factor of the first's result
 MAX_STEPS = 10  # Levenberg-Marquardt steps of the local fit (each: one forward-mode simulation per parameter)
 ZETAS = (0.01, 0.02, 0.04, 0.08, 0.15, 0.3)  # damping ratios of the spring's own mode scanned with the stiffness
+PLAYS = tuple(np.geomspace(2e-3 / 8, 6.4e-2, 17))  # [rad] half-widths of the play screened (0.25-64 mrad)
+PLAY_K = tuple(np.geomspace(0.7, 2.8, 7))  # the placed spring's stiffness scaled by these with each play
 
 
 def time_data(s: R.ResponseSet, x0, name: str):
@@ -56,45 +67,51 @@ def _spring_effect(model):
     return next((i, e) for i, e in enumerate(model.effects) if isinstance(e, FlexibleJoints))
 
 
-def _model(robot, tfit, springs, rotor, j, k, c, im):
+def _model(robot, tfit, springs, rotor, j, k, c, im, b=None):
     sp = dict(springs)
-    sp[j] = (k, c, im)
+    sp[j] = (k, c, im) if b is None else (k, c, im, b)
     return R.simulation_model(robot, tfit, sp, rotor)
 
 
 @eqx.filter_jit
-def _solve_batch(model, i, slot, ks, cs, ims, ts, x0s, inputs, outputs):
-    def one(k, c, im, x0):
+def _solve_batch(model, i, slot, ks, cs, ims, ts, x0s, inputs, outputs, bs=None):
+    def one(k, c, im, x0, b):
         fj = model.effects[i]
         m = eqx.tree_at(lambda m: (m.effects[i].stiffness, m.effects[i].damping, m.effects[i].rotor_inertia), model,
                         (fj.stiffness.at[slot].set(k), fj.damping.at[slot].set(c), fj.rotor_inertia.at[slot].set(im)))
+        if b is not None:
+            m = eqx.tree_at(lambda m: m.effects[i].play, m, fj.play.at[slot].set(b))
         return simulate(m, ts, x0, inputs=inputs, outputs=outputs, rtol=R.RTOL, atol=R.ATOL, max_steps=R.MAX_STEPS,
                         throw=False).outputs
 
-    return jax.vmap(one)(ks, cs, ims, x0s)
+    return jax.vmap(one)(ks, cs, ims, x0s, bs)
 
 
-def _grid_costs(robot, tfit, springs, rotor, j, ks, cs, ims, sets) -> np.ndarray:
+def _grid_costs(robot, tfit, springs, rotor, j, ks, cs, ims, sets, bs=None) -> np.ndarray:
     """Training costs of the springs ``(ks[b], cs[b])`` with motor inertias ``ims`` (scalar or
     (B,)) at joint ``j``: one vmapped simulation per record for the whole batch, the spring's
     leaves set inside the compiled program (a model built per grid point cost more than its
     simulation; one solve each was 14x slower on a 3-joint arm, bit for bit the same). The
     motor's rest angle of each spring follows its stiffness (the static joint torque does not
-    depend on it)."""
+    depend on it). ``bs`` (B,): the play of each spring [rad] (None: a spring without play)."""
     ks = np.asarray(ks, float)
     cs = np.asarray(cs, float)
     ims = np.broadcast_to(np.asarray(ims, float), ks.shape)
-    model = _model(robot, tfit, springs, rotor, j, ks[0], cs[0], ims[0])
+    model = _model(robot, tfit, springs, rotor, j, ks[0], cs[0], ims[0], None if bs is None else float(bs[0]))
     i, fj = _spring_effect(model)
     slot = list(fj.joints).index(j)
     total = np.zeros(len(ks))
     for s in sets:
         x_ref = np.asarray(R.rest_coords(model, s.q0), float)
-        defl = (x_ref[robot.nq + slot] - s.q0[j]) * ks[0]  # the static torque at the joint
         x0s = np.tile(x_ref, (len(ks), 1))
-        x0s[:, robot.nq + slot] = s.q0[j] + defl / ks
+        if bs is None:
+            defl = (x_ref[robot.nq + slot] - s.q0[j]) * ks[0]  # the static torque at the joint
+            x0s[:, robot.nq + slot] = s.q0[j] + defl / ks
+        else:
+            tau = R.static_torque(model, s.q0)[j]
+            x0s[:, robot.nq + slot] = s.q0[j] + R.rest_deflection(tau, ks, bs, float(fj.play_smoothing))
         out = _solve_batch(model, i, slot, jnp.asarray(ks), jnp.asarray(cs), jnp.asarray(ims), jnp.asarray(s.t),
-                           jnp.asarray(x0s), Sampled(s.t, s.tau), s.outputs)
+                           jnp.asarray(x0s), Sampled(s.t, s.tau), s.outputs, None if bs is None else jnp.asarray(bs, float))
         e, _ = R.error(R.channels(out, s), s)
         total += np.sum(e**2, axis=(1, 2))
     return total
@@ -144,6 +161,30 @@ def scan_spring(robot, tfit, springs: dict, rotor, j: int, sets, basins: int = 1
     return out
 
 
+def spring_at(robot, tfit, springs: dict, rotor, j: int) -> tuple:
+    """``(k, c, I_m)`` of the spring at joint ``j`` as the simulation holds it (a nominal or FRF
+    spring's motor inertia read from the simulation model)."""
+    v = springs[j]
+    if len(v) >= 3:
+        return tuple(float(a) for a in v[:3])
+    i, fj = _spring_effect(R.simulation_model(robot, tfit, springs, rotor))
+    return float(v[0]), float(v[1]), float(np.asarray(fj.rotor_inertia)[list(fj.joints).index(j)])
+
+
+def scan_play(robot, tfit, springs: dict, rotor, j: int, sets) -> list:
+    """``[(k, c, I_m, b)]``: play of half-width ``b`` [rad] inside the spring the simulation holds
+    at joint ``j`` (``springs[j]``), screened on the output-error training ``sets``: each play of
+    :data:`PLAYS` with the spring's stiffness scaled by each of :data:`PLAY_K` (its damping with
+    the square root: the same damping ratio), one vmapped solve per record; the other springs
+    held. :func:`polish_spring` then identifies it."""
+    k0, c0, im = spring_at(robot, tfit, springs, rotor, j)
+    F, B = (a.ravel() for a in np.meshgrid(PLAY_K, PLAYS, indexing="ij"))
+    ks, cs = k0 * F, c0 * np.sqrt(F)
+    cost = _grid_costs(robot, tfit, springs, rotor, j, ks, cs, im, sets, bs=B)
+    b = int(np.argmin(cost))
+    return [(float(ks[b]), float(cs[b]), im, float(B[b]))]
+
+
 _WHERE: dict = {}  # accessors of the free leaves, one object each (part of the compiled fit's key)
 
 
@@ -160,7 +201,9 @@ def polish_spring(robot, tfit, springs: dict, rotor, j: int, starts, sets) -> tu
     Levenberg-Marquardt with exact forward-mode Jacobians in log k, log c (and log I_m when the
     case does not state it), each record's motor start angle free (the spring's static preload
     moves with k). Returns ``(k, c, I_m)``, or the first start when a record cannot be compared whole.
-    The starts share one compiled residual and Jacobian (same structure, same free leaves)."""
+    The starts share one compiled residual and Jacobian (same structure, same free leaves).
+    Starts ``(k, c, I_m, b)`` (:func:`scan_play`): a spring with play, ``log b`` free too; returns
+    ``(k, c, I_m, b)``."""
     first = _polish_one(robot, tfit, springs, rotor, j, starts[0], sets)
     if first is None:
         return tuple(starts[0])
@@ -185,8 +228,9 @@ def polish_spring(robot, tfit, springs: dict, rotor, j: int, starts, sets) -> tu
 
 
 def _polish_one(robot, tfit, springs, rotor, j, start, sets):
-    k0, c0, im0 = start
-    model = _model(robot, tfit, springs, rotor, j, k0, c0, im0)
+    k0, c0, im0 = start[:3]
+    b0 = start[3] if len(start) > 3 else None
+    model = _model(robot, tfit, springs, rotor, j, k0, c0, im0, b0)
     i, fj = _spring_effect(model)
     slot = list(fj.joints).index(j)
     data = [time_data(s, R.rest_coords(model, s.q0), f"set{m}") for m, s in enumerate(sets)]
@@ -196,8 +240,10 @@ def _polish_one(robot, tfit, springs, rotor, j, start, sets):
              Free("c", _where("damping", i), index=slot, transform=Log())]
     if not (rotor is not None and rotor[j] > 0):
         frees.append(Free("Im", _where("rotor_inertia", i), index=slot, transform=Log()))
+    if b0 is not None:
+        frees.append(Free("b", _where("play", i), index=slot, transform=Log()))
     frees += [Free(f"set{m}.x0", _where("x0", m), index=(0, robot.nq + slot), on="data") for m in range(len(data))]
     res = fit(model, ParameterSpec(frees), data, levenberg_marquardt(), max_steps=MAX_STEPS, progress=False, stall=5)
     e = res.model.effects[i]
-    return (float(np.asarray(e.stiffness)[slot]), float(np.asarray(e.damping)[slot]),
-            float(np.asarray(e.rotor_inertia)[slot]))
+    out = (float(np.asarray(e.stiffness)[slot]), float(np.asarray(e.damping)[slot]), float(np.asarray(e.rotor_inertia)[slot]))
+    return out if b0 is None else out + (float(np.asarray(e.play)[slot]),)

@@ -323,8 +323,9 @@ def tip_case(folder, robot, effects, seed, small=False, cad_error=False):
     two training records and one validation record, 1 s each at 200 Hz, 0.1 mm white noise; the
     rotor inertias stated as nominal values. ``effects``: () or ("joint_flexibility",): a spring
     at a drawn joint whose mode lies at 4-12 Hz; ("joint_flexibility", "backlash"): that spring
-    with play of half-width 2-5 mrad inside it (a sharp dead zone, :func:`.tip.dead_zone`; the
-    applied torques reverse at every joint along these motions, so the play shows). ``cad_error``:
+    with play of half-width 15-40 mrad inside it (a sharp dead zone, :func:`.tip.dead_zone`; the
+    applied torques reverse at every joint along these motions, so the play shows; the springs
+    are soft, 0.1-0.4 rad of deflection along them, and a play of a few mrad is lost in that). ``cad_error``:
     the case's robot a few per cent off (tip records alone cannot identify the inertias; off by
     default)."""
     rng = np.random.default_rng(seed)
@@ -340,7 +341,7 @@ def tip_case(folder, robot, effects, seed, small=False, cad_error=False):
     for eff in effects:
         if eff == "backlash":  # play inside the spring drawn before it (same joint)
             j = flex[0]
-            b = float(rng.uniform(0.002, 0.005))
+            b = float(rng.uniform(0.015, 0.04))
             flex = flex + (b,)
             truth_eff.append(dict(effect=eff, joint=_jn(true, j), params={"b": b}, in_library=True))
             continue
