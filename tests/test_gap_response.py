@@ -207,3 +207,24 @@ def test_simulated_spring_with_play_rests_where_it_holds_gravity():
     x = jnp.asarray(np.concatenate([q0, q0 + d]))
     held = np.asarray(fj.spring_torque(model.rigid, model.layout.slots[-1], x, jnp.zeros(4)))
     assert np.allclose(held, g, rtol=1e-9, atol=0)
+
+
+def test_play_candidate_changes_nothing_until_a_spring_is_held_there():
+    """Backlash on tip records alone is play inside a simulated spring: without a spring at its
+    joint it adds nothing, so the diagnosis neither refits nor ranks it (``Problem.changes``);
+    with torque training data it is the torque side's own term, always a candidate."""
+    import types
+
+    from jflex.gap._problem import Candidate, Problem, State
+
+    def problem(ttrain=(), springs=()):
+        return types.SimpleNamespace(ttrain=list(ttrain), rtrain=["tr"], rval=["va"], ftrain=[],
+                                     sim_springs=lambda st: dict(springs))
+
+    st = State(None, None, None)
+    back, flex = Candidate("backlash", 1), Candidate("joint_flexibility", 1)
+    assert not Problem.changes(problem(), st, back)
+    assert Problem.changes(problem(springs={1: (1e3, 1.0, 0.01)}), st, back)
+    assert not Problem.changes(problem(springs={0: (1e3, 1.0, 0.01)}), st, back)
+    assert Problem.changes(problem(ttrain=["t"]), st, back)
+    assert Problem.changes(problem(), st, flex)

@@ -91,11 +91,14 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     held = indistinguishable_from_inertia(pb, cands)
     tc = sorted([c for c in cands if c in sig], key=lambda c: -sig[c])
     keep = tc[:prune] + [c for c in cands if c not in sig]
+    keep_all = list(keep)  # a candidate that changes nothing yet (pb.changes) may in a later round
     failed = _failed_solves("nominal", ev0)
 
     def first_round(base):
         out = {}
         for c in keep:
+            if not pb.changes(base, c):
+                continue
             st = pb.add(base, c)
             ev = pb.evaluate(st)
             failed.extend(_failed_solves(c.label(pb.names), ev))
@@ -108,10 +111,11 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         if fitted is not None and not fitted:
             keep = []
     say(f"gap {gap_summary(ev0, floor)[0]:.2f} % (noise floor {gap_summary(ev0, floor)[1]:.2f} %), "
-        f"{len(cands)} candidates, {len(keep)} refitted")
+        f"{len(cands)} candidates, {sum(pb.changes(nom, c) for c in keep)} refitted")
     ranking = []
     if fitted is None:
         fitted = first_round(nom)
+    keep = [c for c in keep if c in fitted]
     # a model fitted on the training data reaches a held-out gap no lower than the noise (in
     # expectation): the best candidate's gap bounds a floor estimated from one record, which a sharp
     # unmodelled effect's harmonics can raise above it
@@ -135,11 +139,12 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     def pool(state, k):
         if k == 0:
             return keep
+        keep_k = [c for c in keep_all if pb.changes(state, c)]
         sig_k = signatures(pb, state, cands)
         tc_k = sorted([c for c in cands if c in sig_k], key=lambda c: -sig_k[c])
         # frequency-side candidates have no signature: the later rounds refit the ``prune`` that did
         # best alone (all of them each round cost a 6-joint FRF case 230 s)
-        return tc_k[:prune] + [c for c in keep if c not in sig_k][:prune]
+        return tc_k[:prune] + [c for c in dict.fromkeys(keep + keep_k) if c not in sig_k][:prune]
 
     def refit(state, c):
         st = pb.add(state, c)

@@ -256,6 +256,16 @@ class Problem:
         return [L.Site("joint", self.names.index(j)) for e in self.nominal_effects
                 if e["effect"] == "joint_flexibility" for j in e["joints"]]
 
+    def changes(self, state: State, cand: Candidate) -> bool:
+        """False for a candidate that adds nothing to ``state``: backlash on tip records alone is
+        play inside a spring the simulation holds, and there is none at its joint yet (it becomes a
+        candidate once a spring is placed there; until then it is neither refitted nor ranked)."""
+        if cand.effect != "backlash" or self.ttrain or not (self.rtrain and self.rval):
+            return True
+        if self.ftrain and state.lm is not None:
+            return False  # FRF/modal data place the springs: no tip-side play on them (see add)
+        return cand.joint in self.sim_springs(state)
+
     # --- refits --------------------------------------------------------------------------------
     def add(self, state: State, cand: Candidate) -> State:
         """Refit with ``cand`` added (warm start from ``state``)."""

@@ -250,8 +250,8 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     if r.get("responses_output_error"):
         L.append(f"Response data sets {r['responses_output_error']} were compared as output error: the model simulated "
                  "under their applied torques from rest at their q0 (the torque-side terms and the joint springs with "
-                 "the rotor inertia on their motor side; sensor delay, backlash and the orthogonal and link "
-                 "compliances are not simulated).")
+                 "the rotor inertia on their motor side, with a fitted play inside a spring's transmission; sensor delay, "
+                 "the torque side's backlash and the orthogonal and link compliances are not simulated).")
         tips = [p for p in plots if p.startswith("response_")]
         if tips:
             L.append("Measured vs nominal vs final traces and residuals: " + ", ".join(f"[{p}]({p})" for p in tips) + ".")
