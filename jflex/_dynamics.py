@@ -302,6 +302,24 @@ def _I6(I: s.Inertia):
     return rows
 
 
+def _bias_force(I: s.Inertia, w: s.V3, v: s.V3):
+    """v x* (I v) for the body velocity (w, v). With a known mass m > 0 at the centre c = h / m,
+    by Newton-Euler at the centre: f = m g, n = w x (I_c w) + h x g, g = w x (v + w x c)
+    (about 60 operations against 72 for the cross products of the momentum)."""
+    m = I.m
+    known = isinstance(m, float) and m > 0 and all(isinstance(x, float) for x in (*I.h, *(y for r in I.I.r for y in r)))
+    if not known or all(s._is(x, 0.0) for x in v):  # (v = 0, e.g. the first bodies: the momentum's form folds further)
+        mw, mv = I.apply(w, v)
+        return s.cross_force(w, v, mw, mv)
+    h = I.h
+    c = s.V3(*(x / m for x in h))
+    # I_c = I_o - m ((c.c) 1 - c c^T) = I_o - ((h.c) 1 - h c^T), from known numbers
+    hc = sum(a * b for a, b in zip(h, c))
+    Ic = s.M33(*(s.V3(*(I.I.r[r][k] - ((hc if r == k else 0.0) - h[r] * c[k]) for k in range(3))) for r in range(3)))
+    g = s.cross(w, v + s.cross(w, c))
+    return s.cross(w, Ic.mv(w)) + s.cross(h, g), g.scale(m)
+
+
 def _unit_axis(S):
     """k when the 6-vector S is +-e_k in trace-time floats (a joint about or along a body axis),
     else None."""
@@ -478,8 +496,7 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
     for i in range(n):
         I = c.inertia[i]
         IA.append(_I6(I))
-        mw, mv = I.apply(ls.w[i], ls.v[i])
-        bw, bv = s.cross_force(ls.w[i], ls.v[i], mw, mv)
+        bw, bv = _bias_force(I, ls.w[i], ls.v[i])
         if f_ext is not None:
             bw = bw - s.V3(f_ext[i, 3], f_ext[i, 4], f_ext[i, 5])
             bv = bv - s.V3(f_ext[i, 0], f_ext[i, 1], f_ext[i, 2])
