@@ -309,6 +309,11 @@ def test_payload_candidate_recovers_mass_and_centre_of_mass(tmp_path):
     pp = lm.payload_parameters(x)
     assert pp["mass [kg]"] == pytest.approx(m, rel=0.03), pp
     assert np.linalg.norm(np.asarray(pp["com (tool frame) [m]"]) - com) < 0.01, pp
+    # and the report says so (not "a point mass at the tool frame's origin")
+    from jflex.gap._html import payload_summary
+
+    ps = payload_summary({"linear": {"payload": pp}}, robot, "tool")
+    assert ps["com_m"] == pp["com (tool frame) [m]"] and "centre of mass" in ps["side"]
     point = ToolPayload()
     point.n_params = 1  # the former candidate: a point mass at the tool frame's origin
     lp, xp = point.add(pb, lm0, x0, None)

@@ -111,8 +111,9 @@ class ToolPayload(FrequencyKind):
     parameters cost it the selection. On FRFs the centre of mass took the independent FRF payload
     case from 79 % to 98 % of the excess gap closed (benchmarks/bench_gap_independent.py, case 14;
     mass 2.278 kg for 2.278). Its rotational inertia freed too (10 parameters) closed 96 %, named
-    two more effects that are not there and took 2.5x as long: a sphere of a few centimetres adds a
-    fraction of the lever arm's inertia, which two postures' FRFs do not pin."""
+    two more effects that are not there and ran 297 s against 116 s (load ~6 on 2 cores): a sphere
+    of a few centimetres adds a fraction of the lever arm's inertia, which two postures' FRFs do
+    not pin."""
 
     name = "payload"
     per_joint = False

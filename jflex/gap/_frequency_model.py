@@ -380,12 +380,16 @@ class FrequencyModel:
         return self.tool if self.tool is not None else self.aug.link_names[-1]
 
     def _payload_frame(self):
-        """(body index, the tool frame's pose (4, 4) in the body's frame) of the tool payload."""
-        body, k = self.aug.frame_index(self._tool())
-        T = np.eye(4)
-        if k >= 0:
-            T[:3, :3], T[:3, 3] = np.asarray(self.aug.frame_R[k]), np.asarray(self.aug.frame_p[k])
-        return body, T
+        """(body index, the tool frame's pose (4, 4) in the body's frame) of the tool payload (made
+        once: every evaluation at a new ``x`` asks for it)."""
+        hit = self.__dict__.get("_pframe")
+        if hit is None:
+            body, k = self.aug.frame_index(self._tool())
+            T = np.eye(4)
+            if k >= 0:
+                T[:3, :3], T[:3, 3] = np.asarray(self.aug.frame_R[k]), np.asarray(self.aug.frame_p[k])
+            hit = self._pframe = (body, T)
+        return hit
 
     def _n_payload(self) -> int:
         return int(self.structure.payload)
