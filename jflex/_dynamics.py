@@ -329,6 +329,17 @@ def _unit_axis(S):
     return None
 
 
+def _articulated(IA, U, Dinv, k):
+    """IA - U U^T / D (symmetric), with row and column k exact zeros when the joint's S = +-e_k."""
+    UD = [s.mul(x, Dinv) for x in U]
+    return _sym6(lambda r, j: 0.0 if k in (r, j) else s.sub(IA[r][j], s.mul(UD[r], U[j])))
+
+
+def _sym_add(IA, X):
+    """IA + X for symmetric IA (scalars) and X ((sign, value) entries, see :func:`_comb`)."""
+    return _sym6(lambda r, j: _value(_comb([(1.0, 1.0, IA[r][j]), (1.0, *X[r][j])])))
+
+
 def _signed_permutation(R: s.M33):
     """[(k, sign)] per row when the known rotation R is a signed permutation (R[i][k_i] = sign_i,
     the row's only nonzero entry): axes swapped and flipped, as URDF rpy of multiples of pi/2
@@ -519,15 +530,13 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
         if par >= 0:
             # Ia = IA - U U^T / D, symmetric; Ia S = 0, so for S = +-e_k its row and column k are
             # exactly zero (set so, which folds them out of what follows)
-            k = _unit_axis(S[i])
-            UD = [s.mul(x, Dinv[i]) for x in U[i]]
-            Ia = _sym6(lambda r, j: 0.0 if k in (r, j) else s.sub(IA[i][r][j], s.mul(UD[r], U[i][j])))
+            Ia = _articulated(IA[i], U[i], Dinv[i], _unit_axis(S[i]))
             uD = s.mul(u[i], Dinv[i])
             Iac = _mv6(Ia, cc[i])
             pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
             Ia, pa = _barrier6(c.fence, Ia, pa)
             XtIaX = _congruence(ls.R[i], ls.p[i], Ia, _z_rotation(robot, c, i, q[i]))
-            IA[par] = _sym6(lambda r, j: _value(_comb([(1.0, 1.0, IA[par][r][j]), (1.0, *XtIaX[r][j])])))
+            IA[par] = _sym_add(IA[par], XtIaX)
             fw, fv = s.force_to_parent(ls.R[i], ls.p[i], s.V3(*pa[:3]), s.V3(*pa[3:]))
             pA[par] = [s.add(a, b) for a, b in zip(pA[par], _v6(fw, fv))]
             IA[par], pA[par] = _barrier6(c.fence, IA[par], pA[par])
