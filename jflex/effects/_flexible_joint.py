@@ -24,6 +24,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -288,11 +289,11 @@ class FlexibleJoints(AbstractEffect):
     def spring_torque(self, robot, slots: Slots, x, xd):
         """Torque (m,) the transmission passes from motor to link, ``k dz(theta - q, b) +
         c (theta_dot - q_dot)`` (``K (theta - q) + B (theta_dot - q_dot)`` without play)."""
-        q, th = self._split(slots, x)
         qd, thd = self._split(slots, xd)
-        d = th - q
-        el = self._matrix(self.stiffness) @ d if self.play is None else \
-            self.stiffness * smooth_dead_zone(d, self.play, self.play_smoothing)
+        # the elastic part is the derivative of potential_energy in the motor angles: the law is
+        # stated once, as the energy
+        x = jnp.asarray(x)
+        el = jax.grad(lambda th: self.potential_energy(robot, slots, x.at[slots.coords].set(th)))(x[slots.coords])
         return el + self._matrix(self.damping) @ (thd - qd)
 
     def generalized_force(self, robot, slots: Slots, t, x, xd, z):
