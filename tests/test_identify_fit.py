@@ -301,3 +301,26 @@ def test_stall_ends_a_fit_that_the_cauchy_test_never_stops():
     assert abs(res.values["omega"] - full.values["omega"]) < 1e-3 * full.std["omega"]
     with pytest.raises(jflex.ParameterError, match="stall must be None or a number of steps >= 1"):
         idf.fit(model, spec, data, progress=False, stall=0)
+
+
+def test_time_data_nrmse_from_residuals_equals_its_nrmse():
+    # fit reads a TimeData's NRMSE off the residuals it already has (no second compiled
+    # simulation): the same numbers as the data object's own prediction, per channel, for a
+    # weighted channel, several columns and multiple-shooting residuals beside them
+    robot = _pendulum()
+    fr = lambda fv: jflex.effects.JointFriction(robot.joint_names, viscous=[fv], coulomb=[0.0], stribeck_velocity=1e-6)
+    ts = np.linspace(0, 2, 80, endpoint=False)
+    r = jflex.simulate(jflex.Model(robot, [fr(0.3)]), ts, x0=jnp.array([-1.0]), outputs=("joint1", "x", "xd"))
+    rng = np.random.default_rng(0)
+    meas = {"joint1": np.asarray(r["joint1"]) + 1e-3 * rng.standard_normal(80),
+            "xd": np.asarray(r["xd"]) * 1.05 + 1e-2 * rng.standard_normal((80, 1))}
+    data = idf.TimeData(ts, meas, x0=[-1.0], segments=2, weights={"xd": 3.0})
+    model = jflex.Model(robot, [fr(0.2)])
+    want = {k: float(v) for k, v in data.nrmse(model).items()}
+    got = data.nrmse_from_residuals(data.residuals(model))
+    assert set(got) == set(want) == {"time:joint1", "time:xd"}
+    for k in want:
+        assert want[k] > 1e-3 and np.isclose(got[k], want[k], rtol=1e-10), (k, got[k], want[k])
+    # a zero weight hides the channel from its residuals: no figure is made up
+    assert idf.TimeData(ts, meas, x0=[-1.0], weights={"xd": 0.0}).nrmse_from_residuals(
+        idf.TimeData(ts, meas, x0=[-1.0], weights={"xd": 0.0}).residuals(model)) is None
