@@ -658,10 +658,12 @@ class FrequencyModel:
             # dD / d theta_p = (dK_g - w^2 dM) . d pi / d theta_p
             npl = self._n_payload()
             _, dpi = payload_inertia(x[o:o + npl], self._payload_frame()[1], jac=True)
+            LtT = np.swapaxes(Lt, 1, 2)
             for p_, dp in enumerate(dpi):
+                # -(J D^-1)(dK - w^2 dM)(D^-1 J^T) by batched products (a three-operand einsum
+                # summed it naively: the payload's columns were most of a round's refit time)
                 dK, dMp = P.dKg @ dp, P.dM @ dp
-                dD = dK[None] - w[:, None, None] ** 2 * dMp[None]
-                dH[o + p_] = -np.einsum("fsi,fst,ftj->fij", Lt, dD, G)
+                dH[o + p_] = (w**2)[:, None, None] * ((LtT @ dMp) @ G) - (LtT @ dK) @ G
             o += npl
         for q, ((a, b), r) in enumerate(zip(self.pairs, self.coupling(x))):
             # dD = v (F,) at (a, b) and (b, a): dH = -v J D^-1 (e_a e_b^T + e_b e_a^T) D^-1 J^T
