@@ -189,12 +189,22 @@ def test_simulated_spring_with_play_rests_where_it_holds_gravity():
     """A simulated spring ``(k, c, I_m, b)`` carries play (:class:`jflex.effects.FlexibleJoints`
     ``play``, the other springs without); its rest deflection (:func:`._response.rest_deflection`,
     used by :func:`._response.rest_coords`) is ``b`` past the play plus ``tau / k``, where the
-    transmission passes the link's gravity torque. Without play the model is today's (``play`` None)."""
+    transmission passes the link's gravity torque. Without play every spring holds play 0 (one
+    structure for springs with and without play), and its motion is the plain spring's."""
     inert = [{"mass": 3.0, "com": [0.25, 0.02, 0.0], "inertia": [0.1, 0.0, 0.2, 0.0, 0.0, 0.25]}] * 2
     robot = jflex.from_dh([[0.0, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0]], tool=[0.0, 0.5, 0.0, 0.0], inertias=inert,
                           gravity=(0.0, -9.81, 0.0))
     k, b = np.array([3e3, 2e3]), np.array([0.0, 0.004])
-    assert R.simulation_model(robot, None, {0: (k[0], 1.0, 0.02), 1: (k[1], 1.0, 0.01)}, None).effects[-1].play is None
+    m0 = R.simulation_model(robot, None, {0: (k[0], 1.0, 0.02), 1: (k[1], 1.0, 0.01)}, None)
+    f0 = m0.effects[-1]
+    assert np.array_equal(f0.play, [0.0, 0.0])
+    plain = jflex.Model(m0.robot, [jflex.effects.FlexibleJoints(f0.stiffness, f0.damping, f0.rotor_inertia, joints=f0.joints,
+                                                                coupling=False)])
+    rng = np.random.default_rng(1)
+    x, xd, u = (jnp.asarray(rng.standard_normal(n)) * s for n, s in ((4, 0.01), (4, 1.0), (2, 10.0)))
+    a0, _ = jflex.model_forward_dynamics(m0, 0.0, x, xd, jnp.zeros(0), u)
+    a1, _ = jflex.model_forward_dynamics(plain, 0.0, x, xd, jnp.zeros(0), u)
+    assert np.allclose(a0, a1, rtol=1e-12, atol=1e-9)
     model = R.simulation_model(robot, None, {0: (k[0], 1.0, 0.02), 1: (k[1], 1.0, 0.01, b[1])}, None)
     fj = model.effects[-1]
     assert np.allclose(fj.play, b) and float(fj.play_smoothing) == R.PLAY_SMOOTHING

@@ -266,6 +266,11 @@ class Problem:
             return False  # FRF/modal data place the springs: no tip-side play on them (see add)
         return cand.joint in self.sim_springs(state)
 
+    def screened_by_simulation(self, state: State, cand: Candidate) -> bool:
+        """Whether ``cand`` added to ``state`` is found by simulated screening (:mod:`._simulated`):
+        a new compiled simulation each time it is tried on a new base model."""
+        return cand.effect == "joint_flexibility" and bool(self.rtrain) and not (self.ftrain and state.lm is not None)
+
     # --- refits --------------------------------------------------------------------------------
     def add(self, state: State, cand: Candidate) -> State:
         """Refit with ``cand`` added (warm start from ``state``)."""
@@ -283,13 +288,17 @@ class Problem:
             held = State(tfit, lm, x, state.added, springs)
             sp = self.sim_springs(held)
             if cand.joint in sp:
+                # identified before it is judged: the screened play's held-out gap hung on which
+                # grid point lay nearest (the motor's start angle and the damping held there), and
+                # the identification is the one costly fit either way (a selected spring's is later)
                 found = scan_play(self.robot, tfit, sp, self._rotor(), cand.joint, self.rtrain)
-                springs = tuple((j, v) for j, v in springs if j != cand.joint) + ((cand.joint, found[0]),)
+                ident = polish_spring(self.robot, tfit, sp, self._rotor(), cand.joint, found, self.rtrain)
+                springs = tuple((j, v) for j, v in springs if j != cand.joint) + ((cand.joint, ident),)
                 starts = dict(state.starts)
-                starts[cand.joint] = tuple(found)
+                starts[cand.joint] = (ident,)
                 return State(tfit, lm, x, state.added + (cand,), springs, tuple(starts.items()))
             return State(tfit, lm, x, state.added + (cand,), springs, state.starts)
-        if cand.effect == "joint_flexibility" and self.rtrain and not (self.ftrain and lm is not None):
+        if self.screened_by_simulation(state, cand):
             # no FRF/modal data place the spring: the output-error training records do
             held = State(tfit, lm, x, state.added, springs)
             found = scan_spring(self.robot, tfit, self.sim_springs(held), self._rotor(), cand.joint, self.rtrain, basins=BASINS)

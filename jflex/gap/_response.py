@@ -43,8 +43,8 @@ FAILED_ERROR = 10.0  # normalised error (1000 %) of samples a failed or diverged
 def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     """The rigid robot plus the fitted torque terms (none when ``tfit`` is None) plus the joint
     springs ``{joint: (k, c)}`` [N m/rad, N m s/rad] (or ``(k, c, I_m)``: with the motor's inertia [kg m^2];
-    ``(k, c, I_m, b)``: with play of half-width ``b`` [rad] inside the transmission, the other
-    springs then without play).
+    ``(k, c, I_m, b)``: with play of half-width ``b`` [rad] inside the transmission; the others
+    hold play 0, the plain spring).
 
     Each term puts its own effect into the model (:meth:`._torque.TorqueTerm.contribute`): the
     laws of :mod:`jflex.effects` with the fitted coefficients, zero where a term is absent (one
@@ -75,11 +75,12 @@ def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     if flex:
         kk = np.array([springs[j][0] for j in flex], float)
         cc = np.array([springs[j][1] for j in flex], float)
-        play = None
-        if any(len(springs[j]) > 3 for j in flex):
-            play = jnp.asarray([float(springs[j][3]) if len(springs[j]) > 3 else 0.0 for j in flex])
+        # every spring holds a play leaf (0: exactly the plain spring, its dead zone's terms cancel
+        # to the bit), so that a spring with play and one without are one structure: one compiled
+        # solve for the screening of a joint's spring and of the play inside it
+        play = jnp.asarray([float(springs[j][3]) if len(springs[j]) > 3 else 0.0 for j in flex])
         effects.append(FlexibleJoints(jnp.asarray(kk), jnp.asarray(cc), jnp.asarray(motor), joints=flex, coupling=False,
-                                      **({} if play is None else dict(play=play, play_smoothing=PLAY_SMOOTHING))))
+                                      play=play, play_smoothing=PLAY_SMOOTHING))
     return Model(robot.replace(inertia=jnp.asarray(inert)), effects)
 
 
