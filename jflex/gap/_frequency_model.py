@@ -38,6 +38,7 @@ import dataclasses
 import functools
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.optimize as so
@@ -45,6 +46,8 @@ import scipy.optimize as so
 from .._dynamics import crba, jacobian
 from .._model import Model, gravity_stiffness
 from .._robot import make_robot
+from .._spatial import inertia_matrix3, skew
+from ..identify._physical import log_cholesky_pseudo_inertia, pseudo_inertia_to_params
 from ..effects import KelvinVoigt, Payload, Spring, StructuralDamping, complex_modulus
 
 VISCOUS = KelvinVoigt(1.0)  # every site's default law: the loss stiffness c_s is a viscous coefficient
@@ -245,17 +248,19 @@ def _point_mass(p):
 # --- the tool payload: a rigid body through the log-Cholesky factor of its pseudo-inertia -----------
 PAYLOAD_NAMES = ("log m", "c_x", "c_y", "c_z", "log r_1", "log r_2", "log r_3", "s_12", "s_23", "s_13")
 PAYLOAD_COM_BOX = 0.25  # [m] the payload's centre of mass stays this close to the tool frame's origin (per axis)
-# where each parameter sits in the factor B (4, 4) of the tool-frame pseudo-inertia (below)
-_B_AT = {1: (0, 3), 2: (1, 3), 3: (2, 3), 4: (0, 0), 5: (1, 1), 6: (2, 2), 7: (0, 1), 8: (1, 2), 9: (0, 2)}
+def _payload_pseudo_params(th, T):
+    # the payload's parameters (1, 4 or 10 of PAYLOAD_NAMES) as identify's log-Cholesky vector
+    # (alpha = log m / 2, t = c; a point mass has a zero rotational factor: its log r at -inf)
+    P = th.shape[0]
+    z = jnp.zeros(())
+    c = th[1:4] if P >= 4 else jnp.zeros(3)
+    d, s = (th[4:7], th[7:10]) if P == 10 else (jnp.full(3, -jnp.inf), jnp.zeros(3))
+    theta = jnp.concatenate([jnp.stack([0.5 * th[0] + z]), d, s, c])
+    return pseudo_inertia_to_params(T @ log_cholesky_pseudo_inertia(theta) @ T.T)
 
 
-def _pseudo_to_params(J):
-    """The 10 inertial parameters (Pinocchio's order ``[m, m c, I about the origin]``) of a
-    pseudo-inertia ``J = [[Sigma, h], [h^T, m]]`` (..., 4, 4): linear in ``J``."""
-    S = J[..., :3, :3]
-    tr = S[..., 0, 0] + S[..., 1, 1] + S[..., 2, 2]
-    return np.stack([J[..., 3, 3], J[..., 0, 3], J[..., 1, 3], J[..., 2, 3], tr - S[..., 0, 0], -S[..., 0, 1],
-                     tr - S[..., 1, 1], -S[..., 0, 2], -S[..., 1, 2], tr - S[..., 2, 2]], axis=-1)
+_payload_pi = jax.jit(_payload_pseudo_params)
+_payload_pi_jac = jax.jit(lambda th, T: (_payload_pseudo_params(th, T), jax.jacfwd(_payload_pseudo_params)(th, T)))
 
 
 def payload_inertia(theta, T=None, jac: bool = False):
@@ -263,35 +268,33 @@ def payload_inertia(theta, T=None, jac: bool = False):
     ``theta`` (1, 4 or 10 of :data:`PAYLOAD_NAMES`, in the tool frame ``T`` (4, 4): the tool frame's
     pose in the link's frame); with ``jac``, also their derivatives (len(theta), 10).
 
-    The pseudo-inertia about the tool frame is ``J = A A^T``, ``A = sqrt(m) B``,
-    ``B = [[U, c], [0, 1]]``, ``U`` upper triangular with diagonal ``exp(log r_i)`` and off-diagonal
-    ``s_ij``: ``m = e^{log m}``, ``c`` the centre of mass [m] in tool axes and ``m U U^T`` the second
-    moment about it (the log-Cholesky parametrisation of :func:`jflex.identify.log_cholesky_to_inertia`,
-    its ``alpha`` = ``log m / 2``, ``d_i`` = ``log r_i``, ``t`` = ``c``): every value is a physical body
-    (positive mass, triangle inequalities). Fewer parameters fix the rest: 1, a point mass at the tool
-    frame's origin; 4, a point mass at ``c``. In the link's frame ``J' = T J T^T``."""
+    The log-Cholesky parametrisation of the pseudo-inertia (:func:`jflex.identify.log_cholesky_pseudo_inertia`,
+    its ``alpha`` = ``log m / 2``, ``d_i`` = ``log r_i``, ``s_ij``, ``t`` = ``c``): ``m = e^{log m}``,
+    ``c`` the centre of mass [m] in tool axes, every value a physical body (positive mass, triangle
+    inequalities). Fewer parameters fix the rest: 1, a point mass at the tool frame's origin; 4, a
+    point mass at ``c``. In the link's frame the pseudo-inertia is ``T J T^T``."""
     th = np.clip(np.asarray(theta, float), -60.0, 60.0)
-    P = th.size
-    B = np.zeros((4, 4))
-    B[3, 3] = 1.0
-    for i in range(1, P):
-        r, col = _B_AT[i]
-        B[r, col] = np.exp(th[i]) if 4 <= i <= 6 else th[i]
     T = np.eye(4) if T is None else np.asarray(T, float)
-    sm = np.exp(0.5 * th[0])
-    A = sm * (T @ B)
-    pi = _pseudo_to_params(A @ A.T)
+    # a fit asks for the same parameters at every posture of a residual and again for its Jacobian
+    out = _payload_memo(th.tobytes(), th.size, T.tobytes(), jac)
+    return (out[0].copy(), out[1].copy()) if jac else out.copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _payload_memo(th_b, n, T_b, jac):
+    th = np.frombuffer(th_b, float, n)
+    T = np.frombuffer(T_b, float, 16).reshape(4, 4)
     if not jac:
-        return pi
-    dA = np.zeros((P, 4, 4))
-    dA[0] = 0.5 * A
-    for i in range(1, P):
-        r, col = _B_AT[i]
-        E = np.zeros((4, 4))
-        E[r, col] = B[r, col] if 4 <= i <= 6 else 1.0
-        dA[i] = sm * (T @ E)
-    dJ = dA @ A.T
-    return pi, _pseudo_to_params(dJ + np.swapaxes(dJ, 1, 2))
+        return np.asarray(_payload_compiled(n, False)(th, T))
+    pi, d = _payload_compiled(n, True)(th, T)
+    return np.asarray(pi), np.asarray(d).T
+
+
+@functools.lru_cache(maxsize=None)
+def _payload_compiled(n, jac):
+    # compiled ahead of time: a call costs a fraction of jit's dispatch (thousands per fit)
+    f = _payload_pi_jac if jac else _payload_pi
+    return f.lower(jax.ShapeDtypeStruct((n,), jnp.float64), jax.ShapeDtypeStruct((4, 4), jnp.float64)).compile()
 
 
 def payload_start(n: int, m: float, com=(0.0, 0.0, 0.0), r: float = 0.02) -> np.ndarray:
@@ -403,7 +406,7 @@ class FrequencyModel:
         pt = payload_inertia(th)  # about the tool frame
         m = float(pt[0])
         c = pt[1:4] / m
-        I0 = np.array([[pt[4], pt[5], pt[7]], [pt[5], pt[6], pt[8]], [pt[7], pt[8], pt[9]]])
+        I0 = np.asarray(inertia_matrix3(pt))
         Ic = I0 - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
         body, T = self._payload_frame()
         return {"mass [kg]": m, "com (tool frame) [m]": [float(v) for v in c],
@@ -458,10 +461,8 @@ class FrequencyModel:
         for i in range(10):
             e = np.zeros(10)
             e[i] = 1.0
-            h = e[1:4]
-            hx = np.array([[0.0, -h[2], h[1]], [h[2], 0.0, -h[0]], [-h[1], h[0], 0.0]])
-            Io = np.array([[e[4], e[5], e[7]], [e[5], e[6], e[8]], [e[7], e[8], e[9]]])
-            Lam = np.block([[e[0] * np.eye(3), -hx], [hx, Io]])
+            hx = np.asarray(skew(e[1:4]))
+            Lam = np.block([[e[0] * np.eye(3), -hx], [hx, np.asarray(inertia_matrix3(e))]])
             dM[:, :, i] = Jb.T @ Lam @ Jb
         dKg = np.zeros((S, S, 10))
         ix = np.ix_(coord, coord)

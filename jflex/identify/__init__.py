@@ -16,8 +16,10 @@ from ._physical import (
     PhysicalResult as PhysicalResult,
     inertia_to_log_cholesky as inertia_to_log_cholesky,
     is_consistent as is_consistent,
+    log_cholesky_pseudo_inertia as log_cholesky_pseudo_inertia,
     log_cholesky_to_inertia as log_cholesky_to_inertia,
     physical_fit as physical_fit,
+    pseudo_inertia_to_params as pseudo_inertia_to_params,
 )
 from ._excitation import (
     ExcitationResult as ExcitationResult,

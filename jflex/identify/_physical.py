@@ -18,20 +18,32 @@ import numpy as np
 import optimistix as optx
 
 from .._errors import ParameterError
+from .._spatial import inertia_matrix3
 
 
-def log_cholesky_to_inertia(theta):
-    """10 inertial parameters (Pinocchio order) of a log-Cholesky vector (10,)."""
+def log_cholesky_pseudo_inertia(theta):
+    """The pseudo-inertia ``J = U U^T`` (4, 4) of a log-Cholesky vector (10,) (see the module)."""
     a, d1, d2, d3, s12, s23, s13, t1, t2, t3 = [theta[i] for i in range(10)]
     z = jnp.zeros_like(a)
     U = jnp.exp(a) * jnp.array(
         [[jnp.exp(d1), s12, s13, t1], [z, jnp.exp(d2), s23, t2], [z, z, jnp.exp(d3), t3], [z, z, z, z + 1.0]]
     )
-    J = U @ U.T
-    S = J[:3, :3]
-    I = jnp.trace(S) * jnp.eye(3) - S
-    h = J[:3, 3]
-    return jnp.array([J[3, 3], h[0], h[1], h[2], I[0, 0], I[0, 1], I[1, 1], I[0, 2], I[1, 2], I[2, 2]])
+    return U @ U.T
+
+
+def pseudo_inertia_to_params(J):
+    """The 10 inertial parameters (Pinocchio order ``[m, m c, I about the origin]``) of a
+    pseudo-inertia ``J = [[Sigma, h], [h^T, m]]`` (..., 4, 4); linear in ``J`` (so a frame change
+    ``T J T^T`` of the body is one of its parameters)."""
+    S = J[..., :3, :3]
+    tr = S[..., 0, 0] + S[..., 1, 1] + S[..., 2, 2]
+    return jnp.stack([J[..., 3, 3], J[..., 0, 3], J[..., 1, 3], J[..., 2, 3], tr - S[..., 0, 0], -S[..., 0, 1],
+                      tr - S[..., 1, 1], -S[..., 0, 2], -S[..., 1, 2], tr - S[..., 2, 2]], axis=-1)
+
+
+def log_cholesky_to_inertia(theta):
+    """10 inertial parameters (Pinocchio order) of a log-Cholesky vector (10,)."""
+    return pseudo_inertia_to_params(log_cholesky_pseudo_inertia(theta))
 
 
 def inertia_to_log_cholesky(pi, eps: float = 1e-9):
@@ -39,7 +51,7 @@ def inertia_to_log_cholesky(pi, eps: float = 1e-9):
     adding ``eps`` (relative) to its pseudo-inertia's eigenvalues."""
     pi = np.asarray(pi, dtype=float)
     m, h = pi[0], pi[1:4]
-    I = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
+    I = np.asarray(inertia_matrix3(pi))
     S = 0.5 * np.trace(I) * np.eye(3) - I
     J = np.block([[S, h[:, None]], [h[None, :], np.array([[m]])]])
     w, V = np.linalg.eigh(J)
@@ -58,7 +70,7 @@ def inertia_to_log_cholesky(pi, eps: float = 1e-9):
 def is_consistent(pi, tol: float = 1e-9) -> bool:
     """Whether 10 inertial parameters describe a physical body (pseudo-inertia PSD)."""
     pi = np.asarray(pi, dtype=float)
-    I = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
+    I = np.asarray(inertia_matrix3(pi))
     S = 0.5 * np.trace(I) * np.eye(3) - I
     J = np.block([[S, pi[1:4, None]], [pi[None, 1:4], np.array([[pi[0]]])]])
     w = np.linalg.eigvalsh(J)
