@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from jflex.gap import diagnose, load_case
-from jflex.gap._problem import Candidate, Problem
+from jflex.gap._problem import Candidate, Problem, State
 
 pytest.importorskip("pinocchio")
 
@@ -27,6 +27,11 @@ def test_tip_records_make_every_joint_a_simulated_candidate(flexible_tip_case):
     pb = Problem(load_case(folder))
     assert len(pb.rtrain) == 2 and len(pb.rval) == 1 and pb.responses == []
     assert [c for c in pb.candidates() if c.effect == "joint_flexibility"] == [Candidate("joint_flexibility", j) for j in range(3)]
+    # each is a simulated screening (what the diagnosis runs side by side, and screens again in a
+    # later round only where it closed enough alone); play inside a spring is not screened that way
+    st = State(None, None, None)
+    assert all(pb.screened_by_simulation(st, Candidate("joint_flexibility", j)) for j in range(3))
+    assert not pb.screened_by_simulation(st, Candidate("backlash", 0))
 
 
 def test_screening_places_the_spring_near_its_stiffness(flexible_tip_case):

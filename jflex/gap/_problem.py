@@ -23,9 +23,6 @@ from . import _torque as T
 from ._torque_terms import KINDS, make_term
 
 TORQUE_EFFECTS = tuple(KINDS)
-# refitted through jflex.simulate on output-error training records; backlash there is play inside a
-# spring the simulation holds (the torque side's backlash, on torque records, is its own term)
-SIMULATED_EFFECTS = ("joint_flexibility", "backlash")
 # pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
 CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
                                      ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
@@ -268,7 +265,9 @@ class Problem:
 
     def screened_by_simulation(self, state: State, cand: Candidate) -> bool:
         """Whether ``cand`` added to ``state`` is found by simulated screening (:mod:`._simulated`):
-        a new compiled simulation each time it is tried on a new base model."""
+        a new compiled simulation each time it is tried on a new base model. (On output-error
+        records ``backlash`` is play inside a spring the simulation holds, screened and identified
+        with it, :meth:`add`; the torque side's backlash, on torque records, is its own term.)"""
         return cand.effect == "joint_flexibility" and bool(self.rtrain) and not (self.ftrain and state.lm is not None)
 
     # --- refits --------------------------------------------------------------------------------
