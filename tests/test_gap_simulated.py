@@ -74,3 +74,21 @@ def test_diagnosis_names_and_identifies_a_flexible_joint_from_tip_records(tmp_pa
     folder, _ = make_case(tmp_path / "null", kind="tip", robot="arm3", effects=(), seed=11)
     r = diagnose(folder).result
     assert r["verdict"] == "within_noise" and r["selected"] == []
+
+
+def test_cad_error_on_tip_records_lies_within_the_cad_spread(tmp_path):
+    """Tool positions alone cannot identify the inertias, and an open-loop record carries their error
+    along it: the independent generator's CAD error (masses 2-10 % off, centres of mass 0.5-2 cm)
+    makes a gap far above the noise, which the diagnosis must not call an unmodelled effect. The
+    first-order spread of the CAD tolerance (``._response.cad_spread``, reported as ``cad_spread``
+    when nothing explains a gap) covers it."""
+    from independent import cases as C
+    from jflex.gap._diagnose import _cad_spread
+
+    C.tip_case(tmp_path / "null", "arm3", (), 9103, cad_error=True)
+    pb = Problem(load_case(tmp_path / "null"))
+    nom = pb.nominal_state()
+    gap = pb.evaluate(nom)["tip2"]["nrmse"]
+    spread = _cad_spread(pb, nom)
+    assert gap > 10.0, gap  # the records' noise is ~0.07 %
+    assert set(spread) == {"tip2"} and gap < spread["tip2"], (gap, spread)

@@ -23,7 +23,8 @@ import numpy as np
 
 from ._case import Case, load_case
 from ._frequency_inertia import cad_spread
-from ._inertia import link_moves
+from ._inertia import inertia_prior, link_moves
+from ._response import cad_spread as cad_spread_response
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
 from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
@@ -257,7 +258,12 @@ RESCREEN_SHRINK = 5.0
 def _cad_spread(pb: Problem, nom: State) -> dict:
     """Per modal validation table, the gap spread of the CAD inertias' tolerance
     (:func:`._frequency_inertia.cad_spread`), when nothing identified the inertias: no torque data,
-    and a refit on the frequency training data did not pay for its parameters. Else empty."""
+    and a refit on the frequency training data did not pay for its parameters; per output-error
+    validation set (tool positions) when no torque or frequency data are given
+    (:func:`._response.cad_spread`). Else empty."""
+    if not pb.ttrain and not pb.ftrain and pb.rval:
+        return cad_spread_response(pb.robot, nom.tfit, pb.sim_springs(nom), pb._rotor(), pb.rval,
+                                   inertia_prior(pb.robot, float(pb.options["inertia_prior"])))
     li = pb.lin_inertia
     if pb.ttrain or li is None or li["used"] or li["gain"] > 0 or nom.lm is None:
         return {}
