@@ -228,12 +228,22 @@ def _inertia_to_parent(robot, c, i, qi, ls, I):
     """Body i's (composite) inertia about its parent's frame. For a revolute joint about +-z (every
     DH joint, most URDF joints) the joint rotation is applied first, in closed form, and the
     constant placement after it, where trace-time folding makes it nearly free."""
-    ax = c.axis[i]
-    # the test is on trace-time floats: a traced axis (gradients in the robot) takes the general path
-    if robot.joint_types[i] != PRISMATIC and s._is(ax.x, 0.0) and s._is(ax.y, 0.0) and (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
-        cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi), fence=c.fence)
-        return I.rotated_z(cs, sn).to_parent(c.Rpl[i], c.ppl[i])
+    rz = _z_cos_sin(robot, c, i, qi)
+    if rz is not None:
+        return I.rotated_z(*rz).to_parent(c.Rpl[i], c.ppl[i])
     return I.to_parent(ls.R[i], ls.p[i])
+
+
+def _z_cos_sin(robot, c, i, qi):
+    """``(cos, sin)`` of body i's rotation about its placement's z when joint i is revolute about
+    +-z (every DH joint, most URDF joints), else None. The test is on trace-time floats: a traced
+    axis (gradients in the robot) takes the general path."""
+    ax = c.axis[i]
+    if robot.joint_types[i] == PRISMATIC or not (s._is(ax.x, 0.0) and s._is(ax.y, 0.0)):
+        return None
+    if not (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
+        return None
+    return s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi), fence=c.fence)
 
 
 def crba(robot: Robot, q):
@@ -356,16 +366,9 @@ def _signed_permutation(R: s.M33):
 def _z_rotation(robot, c, i, qi):
     """(signed permutation of the placement, cos, sin) when body i sits at R = Rpl Rz(+-q_i) with
     Rpl a signed permutation (see :func:`_signed_permutation`), else None."""
-    ax = c.axis[i]
-    if robot.joint_types[i] == PRISMATIC or not (s._is(ax.x, 0.0) and s._is(ax.y, 0.0)):
-        return None
-    if not (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
-        return None
     perm = _signed_permutation(c.Rpl[i])
-    if perm is None:
-        return None
-    cs, sn = s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi), fence=c.fence)
-    return perm, cs, sn
+    rz = None if perm is None else _z_cos_sin(robot, c, i, qi)
+    return None if rz is None else (perm, *rz)
 
 
 def _rotate_z(M, c, sn, cs, ss, sym):
