@@ -46,7 +46,7 @@ import scipy.optimize as so
 from .._dynamics import crba, jacobian
 from .._model import Model, gravity_stiffness
 from .._robot import make_robot
-from .._spatial import inertia_matrix3, skew
+from .._spatial import inertia_matrix3, params_to_com, skew
 from ..identify._physical import log_cholesky_pseudo_inertia, pseudo_inertia_to_params
 from ..effects import KelvinVoigt, Payload, Spring, StructuralDamping, complex_modulus
 
@@ -239,12 +239,6 @@ def augment(robot, springs):
     return aug, np.array(coord, dtype=int), np.array(model_index, dtype=int)
 
 
-def _point_mass(p):
-    x, y, z = p
-    # [m, mc, I about the body origin] of a unit point mass (Pinocchio's order)
-    return np.array([1.0, x, y, z, y * y + z * z, -x * y, x * x + z * z, -x * z, -y * z, x * x + y * y])
-
-
 # --- the tool payload: a rigid body through the log-Cholesky factor of its pseudo-inertia -----------
 PAYLOAD_NAMES = ("log m", "c_x", "c_y", "c_z", "log r_1", "log r_2", "log r_3", "s_12", "s_23", "s_13")
 PAYLOAD_COM_BOX = 0.25  # [m] the payload's centre of mass stays this close to the tool frame's origin (per axis)
@@ -403,11 +397,8 @@ class FrequencyModel:
         about the link's frame."""
         P = self._n_payload()
         th = np.asarray(x, float)[2 * len(self.structure.springs):][:P]
-        pt = payload_inertia(th)  # about the tool frame
-        m = float(pt[0])
-        c = pt[1:4] / m
-        I0 = np.asarray(inertia_matrix3(pt))
-        Ic = I0 - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+        m, c, Ic = (np.asarray(a) for a in params_to_com(payload_inertia(th)))  # about the tool frame
+        m = float(m)
         body, T = self._payload_frame()
         return {"mass [kg]": m, "com (tool frame) [m]": [float(v) for v in c],
                 "inertia about com (tool axes) [kg m^2]": [float(Ic[i, j]) for i, j in ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))],

@@ -21,6 +21,7 @@ import yaml
 
 from jflex._config import load_robot
 from jflex._dynamics import rnea
+from jflex._spatial import params_from_com
 from jflex.gap import _frequency_model as L
 
 # --- robots (written as DH YAML so the case is self-contained) -------------------------------------
@@ -114,10 +115,8 @@ def torque_truth(robot, effect, joint, params, t, q, qd, qdd):
         body, kf = robot.frame_index("tool")
         p = np.asarray(robot.frame_p[kf]) + np.array(params["offset"])
         m, rad = params["m"], 0.06
-        pm = L._point_mass(p) * m
-        Is = 0.4 * m * rad**2  # solid sphere about its own centre: not in the candidate's 4 parameters
-        pm[[4, 6, 9]] += Is
-        inert[body] += pm
+        # a solid sphere about its own centre (its rotational inertia is not in the candidate's 4 parameters)
+        inert[body] += np.asarray(params_from_com(m, p, 0.4 * m * rad**2 * np.eye(3)))
         out = rigid_torque(robot.replace(inertia=inert), q, qd, qdd) - rigid_torque(robot, q, qd, qdd)
     return out
 
@@ -181,9 +180,7 @@ def frf_truth(robot, tool, springs, K, laws, q0, freq, payload=None):
         body, kf = lm.aug.frame_index(tool)
         inert = np.asarray(lm.aug.inertia).copy()
         p = np.asarray(lm.aug.frame_p[kf]) + np.asarray(payload[1])
-        pm = L._point_mass(p) * payload[0]
-        pm[[4, 6, 9]] += 0.4 * payload[0] * 0.06**2
-        inert[body] += pm
+        inert[body] += np.asarray(params_from_com(payload[0], p, 0.4 * payload[0] * 0.06**2 * np.eye(3)))
         lm2 = L.FrequencyModel(robot, L.Structure(tuple(springs)), tool)
         lm2.aug = lm.aug.replace(inertia=inert)
         P2 = lm2.mats(q0)
