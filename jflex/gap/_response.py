@@ -84,17 +84,18 @@ def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     return Model(robot.replace(inertia=jnp.asarray(inert)), effects)
 
 
-def rest_coords(model: Model, q0) -> np.ndarray:
+def rest_coords(model: Model, q0, tau=None) -> np.ndarray:
     """Coordinates of the model at rest at link posture ``q0``: each spring preloaded by the
     static joint torque (gravity less the fitted compensators), ``theta = q0 + tau_static / k``
-    (with play: the deflection of the spring's dead zone that holds it, :func:`rest_deflection`)."""
+    (with play: the deflection of the spring's dead zone that holds it, :func:`rest_deflection`).
+    ``tau``: :func:`static_torque` at ``q0`` when the caller has it already."""
     q0 = np.asarray(q0, float)
     flex = [e for e in model.effects if isinstance(e, FlexibleJoints)]
     if not flex:
         return q0
     fj = flex[0]
     idx = list(fj.joints)
-    tau = static_torque(model, q0)
+    tau = static_torque(model, q0) if tau is None else tau
     if fj.play is None:
         return np.concatenate([q0, q0[idx] + tau[idx] / np.asarray(fj.stiffness)])
     return np.concatenate([q0, q0[idx] + rest_deflection(tau[idx], np.asarray(fj.stiffness), np.asarray(fj.play),
@@ -117,6 +118,8 @@ def rest_deflection(torque, k, b, eps) -> np.ndarray:
     monotone), by bisection on ``[tau/k - b, tau/k + b]``; exactly ``torque / k`` where ``b = 0``."""
     y = np.asarray(torque, float) / np.asarray(k, float)
     b = np.broadcast_to(np.asarray(b, float), y.shape)
+    if not np.any(b > 0):  # (every simulated spring holds a play leaf: most are 0)
+        return y
     lo, hi = y - b, y + b
     for _ in range(60):
         mid = 0.5 * (lo + hi)

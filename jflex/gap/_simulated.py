@@ -111,15 +111,29 @@ def _grid_costs(robot, tfit, springs, rotor, j, ks, cs, ims, sets, bs=None) -> n
     slot = list(fj.joints).index(j)
     total = np.zeros(len(ks))
     for s in sets:
-        x_ref = np.asarray(R.rest_coords(model, s.q0), float)
-        x0s = np.tile(x_ref, (len(ks), 1))
-        tau = R.static_torque(model, s.q0)[j]
-        x0s[:, robot.nq + slot] = s.q0[j] + R.rest_deflection(tau, ks, bs, float(fj.play_smoothing))
+        tau = R.static_torque(model, s.q0)
+        x0s = np.tile(np.asarray(R.rest_coords(model, s.q0, tau), float), (len(ks), 1))
+        x0s[:, robot.nq + slot] = s.q0[j] + R.rest_deflection(tau[j], ks, bs, float(fj.play_smoothing))
         out = _solve_batch(model, i, slot, jnp.asarray(ks), jnp.asarray(cs), jnp.asarray(ims), jnp.asarray(s.t),
                            jnp.asarray(x0s), Sampled(s.t, s.tau), s.outputs, jnp.asarray(bs))
         e, _ = R.error(R.channels(out, s), s)
         total += np.sum(e**2, axis=(1, 2))
     return total
+
+
+def _coarse_then_fine(la, lb, costs):
+    """The grid ``la x lb`` (log axes), then a finer grid of the same size (the same compiled
+    program) around its best, one coarse step either side in each: ``[(A, B, cost)]`` for each,
+    ``A, B`` the grid points (raveled), ``cost = costs(A, B)``."""
+    def grid(x, y):
+        A, B = (np.exp(a.ravel()) for a in np.meshgrid(x, y, indexing="ij"))
+        return A, B, costs(A, B)
+
+    coarse = grid(la, lb)
+    b = int(np.argmin(coarse[2]))
+    da, db = la[1] - la[0], lb[1] - lb[0]
+    fine = grid(np.log(coarse[0][b]) + np.linspace(-da, da, len(la)), np.log(coarse[1][b]) + np.linspace(-db, db, len(lb)))
+    return coarse, fine
 
 
 def scan_spring(robot, tfit, springs: dict, rotor, j: int, sets, basins: int = 1):
@@ -140,16 +154,9 @@ def scan_spring(robot, tfit, springs: dict, rotor, j: int, sets, basins: int = 1
     lk = np.log(m_jj * (2 * np.pi * np.geomspace(1.0, 0.25 * fs, K_GRID)) ** 2)
     lz = np.log(ZETAS)
 
-    def grid(lks, lzs):
-        LK, LZ = (a.ravel() for a in np.meshgrid(lks, lzs, indexing="ij"))
-        ks, zs = np.exp(LK), np.exp(LZ)
-        return ks, zs, _grid_costs(robot, tfit, springs, rotor, j, ks, 2 * zs * np.sqrt(ks * im), im, sets)
-
-    ks, zs, cost = grid(lk, lz)
-    b = int(np.argmin(cost))
-    # the finer grid: one coarse step either side in log k and in log zeta, same size (same program)
-    dk, dz = lk[1] - lk[0], lz[1] - lz[0]
-    kf, zf, costf = grid(np.log(ks[b]) + np.linspace(-dk, dk, K_GRID), np.log(zs[b]) + np.linspace(-dz, dz, len(ZETAS)))
+    (_, _, cost), (kf, zf, costf) = _coarse_then_fine(
+        lk, lz, lambda ks, zs: _grid_costs(robot, tfit, springs, rotor, j, ks, 2 * zs * np.sqrt(ks * im), im, sets))
+    dk = lk[1] - lk[0]
     bf = int(np.argmin(costf))
     best = (float(kf[bf]), float(2 * zf[bf] * np.sqrt(kf[bf] * im)), im)
     if basins <= 1:
@@ -184,20 +191,11 @@ def scan_play(robot, tfit, springs: dict, rotor, j: int, sets) -> list:
     one vmapped solve per record each; the other springs held. :func:`polish_spring` then
     identifies it."""
     k0, c0, im = spring_at(robot, tfit, springs, rotor, j)
-    lf, lb = np.log(PLAY_K), np.log(PLAYS)
-
-    def grid(lfs, lbs):
-        F, B = (np.exp(a.ravel()) for a in np.meshgrid(lfs, lbs, indexing="ij"))
-        cost = _grid_costs(robot, tfit, springs, rotor, j, k0 * F, c0 * np.sqrt(F), im, sets, bs=B)
-        return F, B, cost
-
-    F, B, cost = grid(lf, lb)
-    b = int(np.argmin(cost))
-    # then a finer grid of the same size around the best, one coarse step either side (the
-    # coarse grid's best alone was as far off as its step: which grid point lay nearest decided
-    # whether the play paid for itself on held-out data)
-    df, db = lf[1] - lf[0], lb[1] - lb[0]
-    F, B, cost = grid(np.log(F[b]) + np.linspace(-df, df, len(PLAY_K)), np.log(B[b]) + np.linspace(-db, db, len(PLAYS)))
+    # the finer grid too: the coarse grid's best alone was as far off as its step (which grid point
+    # lay nearest decided whether the play paid for itself on held-out data)
+    _, (F, B, cost) = _coarse_then_fine(
+        np.log(PLAY_K), np.log(PLAYS),
+        lambda F, B: _grid_costs(robot, tfit, springs, rotor, j, k0 * F, c0 * np.sqrt(F), im, sets, bs=B))
     b = int(np.argmin(cost))
     return [(float(k0 * F[b]), float(c0 * np.sqrt(F[b])), im, float(B[b]))]
 
