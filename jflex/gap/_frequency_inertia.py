@@ -41,7 +41,7 @@ import numpy as np
 import scipy.optimize as so
 
 from . import _frequency_model as L
-from ._inertia import InertiaPrior
+from ._inertia import InertiaPrior, tolerance_spread
 
 
 class _Shifted(L.FrequencyModel):
@@ -136,18 +136,10 @@ def cad_spread(lm: L.FrequencyModel, x, sets, prior: InertiaPrior, step: float =
     frequencies and damping are smooth in the inertias; an FRF near a lightly damped peak is not
     (a first-order spread there is meaningless), so FRF sets get none."""
     sh = _Shifted(lm)
-    s = prior.scale
-    free = np.flatnonzero(s > 1e-9 * max(float(s.max()), 1e-12))
-    out = {}
-    for d in sets:
-        if d.kind != "modal":
-            continue
-        sh.delta = np.zeros(s.size)
-        r0 = L.residual(sh, x, [d], peaks=False)
-        cols = []
-        for p in free:
-            sh.delta = np.zeros(s.size)
-            sh.delta[p] = step * s[p]
-            cols.append((L.residual(sh, x, [d], peaks=False) - r0) / step)
-        out[d.name] = float(np.sqrt(sum(float(c @ c) for c in cols)) * 100)
-    return out
+    modal = [d for d in sets if d.kind == "modal"]
+
+    def residuals(delta):
+        sh.delta = delta
+        return {d.name: L.residual(sh, x, [d], peaks=False) for d in modal}
+
+    return tolerance_spread(prior, residuals, step)

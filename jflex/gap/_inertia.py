@@ -66,6 +66,24 @@ def inertia_prior(robot, weight: float = 1.0) -> InertiaPrior:
     return InertiaPrior(P.ravel().copy(), s.ravel(), float(weight))
 
 
+def tolerance_spread(prior: InertiaPrior, residuals, step: float = 1e-3) -> dict:
+    """Per data set, the spread [% NRMSE, one std] of its gap that the CAD inertias' tolerance
+    alone gives (``u ~ N(0, I)``, ``delta = s u``, ``s`` the prior's scale), to first order: the
+    Frobenius norm of the residual's Jacobian in ``u``, times 100, by forward differences.
+    ``residuals(delta)``: ``{name: vector}`` at the inertial parameters CAD + ``delta`` (10 n,),
+    each vector's sum of squares the set's NRMSE^2."""
+    s = np.asarray(prior.scale, float)
+    r0 = residuals(np.zeros(s.size))
+    acc = dict.fromkeys(r0, 0.0)
+    for p in np.flatnonzero(s > 1e-9 * max(float(s.max()), 1e-12)):
+        d = np.zeros(s.size)
+        d[p] = step * s[p]
+        for k, r in residuals(d).items():
+            c = (r - r0[k]) / step
+            acc[k] += float(c @ c)
+    return {k: float(np.sqrt(v) * 100) for k, v in acc.items()}
+
+
 def link_moves(robot, pi0, delta, prior: InertiaPrior | None = None) -> list[dict]:
     """Per link: mass and centre of mass before (CAD) and after the refit, and whether a bound was
     reached (the CAD tolerance did not suffice: a sign of a payload or a grossly wrong CAD)."""

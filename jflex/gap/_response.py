@@ -31,6 +31,7 @@ from ..effects import FlexibleJoints
 from ..effects._flexible_joint import smooth_dead_zone
 from .._inputs import Sampled
 from ._effect_term import FamilyCoefficients
+from ._inertia import tolerance_spread
 
 TIP_CHANNELS = {"tip_x": 0, "tip_y": 1, "tip_z": 2}  # [m] origin of the case's tool_frame, base axes
 RTOL, ATOL = 1e-7, 1e-9  # the records' noise is ~1e-4 of their spread: the solver error stays far below
@@ -204,18 +205,18 @@ def residual(model: Model, s: ResponseSet) -> tuple[np.ndarray, int]:
 def cad_spread(robot, tfit, springs, rotor, sets, prior, step: float = 1e-3) -> dict:
     """Per output-error set in ``sets``: the spread [% NRMSE, one std] of its gap that the CAD
     inertias' tolerance alone gives (``u ~ N(0, I)``, ``delta = s u``, ``s`` the prior's scale), to
-    first order: ``sqrt(sum_p mean((de/du_p)^2)) x 100``, one simulation per inertial parameter (the
+    first order (:func:`._inertia.tolerance_spread`), one simulation per inertial parameter (the
     inertias are leaves: one compiled solve). Tool positions alone cannot identify the inertias,
     and an open-loop record carries their error along it (a few per cent of mass made a gap of
     50 % on the 3-joint arm's 1 s records): a gap of this size does not fault the model."""
-    s = np.asarray(prior.scale, float)
     P0 = np.asarray(robot.inertia, float)
-    e0 = {st.name: residual(simulation_model(robot, tfit, springs, rotor), st)[0] for st in sets}
-    acc = dict.fromkeys(e0, 0.0)
-    for p in np.flatnonzero(s > 1e-9 * max(float(s.max()), 1e-12)):
-        d = np.zeros(P0.size)
-        d[p] = step * s[p]
-        m = simulation_model(robot.replace(inertia=jnp.asarray(P0 + d.reshape(P0.shape))), tfit, springs, rotor)
+
+    def residuals(delta):
+        m = simulation_model(robot.replace(inertia=jnp.asarray(P0 + delta.reshape(P0.shape))), tfit, springs, rotor)
+        out = {}
         for st in sets:
-            acc[st.name] += float(np.mean(((residual(m, st)[0] - e0[st.name]) / step) ** 2))
-    return {k: float(np.sqrt(v) * 100) for k, v in acc.items()}
+            e = residual(m, st)[0]
+            out[st.name] = e.ravel() / np.sqrt(e.size)  # (sum of squares: the NRMSE^2)
+        return out
+
+    return tolerance_spread(prior, residuals, step)
