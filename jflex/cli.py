@@ -47,6 +47,25 @@ def experiments() -> dict[str, pathlib.Path]:
     return dict(sorted(found.items()))
 
 
+def load_experiment(name: str, path: pathlib.Path):
+    """Execute an experiment script as module ``jflex_experiment_<name>``. The module is registered
+    in ``sys.modules`` before it runs: pydantic resolves the string annotations that
+    ``from __future__ import annotations`` leaves (``Annotated[...]``) through the module's entry
+    there, and a schema class defined in an unregistered module stays "not fully defined"."""
+    mod_name = f"jflex_experiment_{name}"
+    spec = importlib.util.spec_from_file_location(mod_name, path)
+    if spec is None or spec.loader is None:
+        raise JFlexError(f"{path}: not a Python script jflex run can load")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = mod
+    try:
+        spec.loader.exec_module(mod)
+    except BaseException:
+        sys.modules.pop(mod_name, None)
+        raise
+    return mod
+
+
 def experiment_summary(path: pathlib.Path, width: int = 110) -> str:
     """The first sentence of a script's docstring, on one line (read, not executed)."""
     try:
@@ -245,9 +264,7 @@ def cmd_run(args) -> int:
             f"no experiment '{args.experiment}' in experiments/; available: {', '.join(experiments())} "
             "(jflex run --list describes them)"
         )
-    spec = importlib.util.spec_from_file_location(f"jflex_experiment_{args.experiment}", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_experiment(args.experiment, path)
     if not hasattr(mod, "main"):
         raise JFlexError(f"{path}: an experiment script must define main(argv)")
     mod.main(args.rest)
