@@ -39,7 +39,7 @@ def _seed_robot(cfg_name):
 
 
 def _robot_yaml(folder, rob, robot, r):
-    base = yaml.safe_load((ROOT / "configs" / "seed003" / rob.cfg["robot"]).read_text())
+    base = jflex.load_yaml(ROOT / "configs" / "seed003" / rob.cfg["robot"])
     P = np.asarray(robot.inertia).copy()
     P[np.abs(P) < 1e-9] = 0.0  # round-off of the realisation (a -1e-14 mass is a zero mass)
     # link 1 turns about the fixed vertical axis, so base parameters only fix its Izz; give it

@@ -91,7 +91,7 @@ def write_case(folder: pathlib.Path, rob, base_model, entry: dict, train, valida
     rigid joint carrying a point mass moved out of link 3; configurations ``train`` (0-based)
     train, ``validation`` validate. Returns the postures (P, n_case)."""
     folder.mkdir(parents=True, exist_ok=True)
-    spec = yaml.safe_load((ROOT / "configs" / "seed003" / rob.cfg["robot"]).read_text())
+    spec = jflex.load_yaml(ROOT / "configs" / "seed003" / rob.cfg["robot"])
     P = np.asarray(base_model.robot.inertia).copy()
     P[np.abs(P) < 1e-9] = 0.0
     # link 1 turns about the fixed vertical axis: base parameters fix only its Izz; Ixx = Iyy =

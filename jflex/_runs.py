@@ -69,9 +69,77 @@ def write_results(run_dir: str | os.PathLike, results: Mapping[str, Any], name: 
     return path
 
 
+# A config is a few hundred nodes; a case with inline data a few ten thousand. Aliases let 1 KB
+# of YAML stand for 1e9 nodes ("billion laughs"): PyYAML builds them as shared objects, so the
+# load is quick, and whatever walks the result next (validation, a copy, JSON) hangs or runs out
+# of memory. The limit is on the document as if every alias were written out.
+MAX_YAML_NODES = 1_000_000
+
+
+class _Refused(yaml.YAMLError):
+    """A YAML document jflex does not read (duplicate key, alias bomb, recursive alias)."""
+
+
 class _Loader(yaml.SafeLoader):
     """Safe loading that reads ``2.1e11`` as a number, as YAML 1.2 does: YAML 1.1 wants
-    ``2.1e+11`` and PyYAML hands the rest over as strings, which a schema rightly refuses."""
+    ``2.1e+11`` and PyYAML hands the rest over as strings, which a schema rightly refuses.
+
+    It also refuses what PyYAML accepts silently: a key given twice in one mapping (the last one
+    would win; a typo'd copy of a block would override the real one), a recursive alias, and a
+    document whose aliases expand past :data:`MAX_YAML_NODES` nodes."""
+
+    def compose_document(self):
+        node = super().compose_document()
+        if node is not None:
+            _expanded_size(node, {}, set())
+        return node
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            first: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # `<<: *base` then a key of the same name overrides it, as YAML means
+                key = self.construct_object(key_node, deep=True)
+                line = key_node.start_mark.line + 1
+                try:
+                    prev = first.get(key)
+                except TypeError:
+                    continue  # unhashable: SafeConstructor says so itself
+                if prev is not None:
+                    raise _Refused(f"duplicate key {key!r} at line {line} (first given at line {prev}); "
+                                   "each key may appear once in a mapping")
+                first[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+def _expanded_size(node, sizes: dict, active: set) -> int:
+    """Nodes of ``node`` with every alias written out (memoised on shared nodes, so a bomb is
+    measured without being expanded); refuses a recursive alias and a total past the limit."""
+    key = id(node)
+    if key in sizes:
+        return sizes[key]
+    if key in active:
+        raise _Refused(f"recursive alias at line {node.start_mark.line + 1}: a config cannot contain itself")
+    active.add(key)
+    total = 1
+    if isinstance(node, yaml.SequenceNode):
+        children = node.value
+    elif isinstance(node, yaml.MappingNode):
+        children = [n for pair in node.value for n in pair]
+    else:
+        children = ()
+    for child in children:
+        total += _expanded_size(child, sizes, active)
+        if total > MAX_YAML_NODES:
+            raise _Refused(
+                f"the document expands to more than {MAX_YAML_NODES:,} nodes through its aliases "
+                f"(&anchor / *alias, the one at line {node.start_mark.line + 1}); write the data out or "
+                "keep it in a data file"
+            )
+    active.discard(key)
+    sizes[key] = total
+    return total
 
 
 _Loader.add_implicit_resolver(
@@ -90,8 +158,12 @@ def load_yaml(path: str | os.PathLike) -> dict:
         data = yaml.load(path.read_text(encoding="utf-8"), Loader=_Loader)
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (undecodable byte at offset {exc.start})") from None
+    except _Refused as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML ({exc})") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: nested too deeply to read (thousands of levels of [ or {{)") from None
     if data is None:
         data = {}
     if not isinstance(data, dict):
