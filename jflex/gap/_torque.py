@@ -88,7 +88,8 @@ def _rigid_batch(robot, q, qd, qdd):
     return F, Y
 
 
-CUTOFF_FACTOR = 2.5  # the parallel low-pass sits at 2.5 x the motion's band (seed 003 3.2: 2-5 x)
+CUTOFF_FACTOR = 2.5  # the parallel low-pass sits at 2.5 x the motion's band (2-5 x is usual)
+CUTOFF_LIMIT = 0.8  # x Nyquist: the highest cutoff "auto" gives a record (jflex.data.choose_cutoff)
 NOISE_DRAWS = 4  # angle-noise redraws propagated through the processing and the model (noise floor)
 NOISE_BAND = (1.5, 4.0)  # x the motion band: where the raw torque's noise level is read
 EDGE_PERIODS = 2.0  # periods of the cutoff trimmed off each end of a filtered record (transients)
@@ -113,30 +114,59 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     column (parallel filtering), optionally followed by keeping every ``decimate``-th sample. The
     noise the filtered residual keeps is predicted from the raw torque's spectrum just above the
     motion band (extrapolated flat into it and weighted by the filter) plus the angle noise
-    propagated through the processing and the model (``NOISE_DRAWS`` redraws)."""
+    propagated through the processing and the model (``NOISE_DRAWS`` redraws).
+
+    A set that gave velocities without accelerations is processed the same way, its velocities
+    low-passed (not the angles differentiated) before they are differentiated once. ``"auto"``
+    chooses the cutoff per record from its own spectrum, inside (0, ``CUTOFF_LIMIT`` x Nyquist),
+    with a named fallback (:func:`jflex.data.choose_cutoff`); stamps that are not uniform are
+    resampled first (:func:`jflex.data.resample_uniform`; :func:`jflex.gap.load_case` has done so
+    already for every reader)."""
+    from ..data._condition import choose_cutoff, resample_uniform
+
     a = ds.arrays
     t, tau_raw = np.asarray(a["t"], float), np.asarray(a["tau"], float)
-    if derivatives_given(ds):
+    # velocities without accelerations (the loader differentiated them, unfiltered, for the record)
+    velocity_only = (getattr(ds, "conditioning", None) or {}).get("derivatives") == "velocity"
+    if derivatives_given(ds) and not velocity_only:
         q, qd, qdd = a["q"], a["qd"], a["qdd"]
         F, Y = (np.asarray(v) for v in _rigid_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
         return TorqueSet(ds.name, t, q, qd, qdd, tau_raw, F, np.maximum(tau_raw.std(axis=0), 1e-9), Y,
                          a["q_extra"], ds.extra_joints, robot)
-    dt = np.diff(t)
-    h = float(dt.mean())
-    if np.max(np.abs(dt - h)) > 0.01 * h:
-        raise DataError(f"{ds.name}: field 't': a torque set with angles only (no qd/qdd) needs uniform sampling "
-                        f"(steps vary by {100 * np.max(np.abs(dt - h)) / h:.1f} %, more than 1 %)")
-    sig_q = angle_noise(a["q"])
-    f_m = motion_band(a["q"], h, sig_q)
-    fc = CUTOFF_FACTOR * f_m if cutoff_hz in (None, "auto") else float(cutoff_hz)
+    rows = {"q": np.asarray(a["q"], float), "tau": tau_raw, "q_extra": np.asarray(a["q_extra"], float)}
+    if velocity_only:
+        rows["qd"] = np.asarray(a["qd"], float)
+    t, rows, sampling = resample_uniform(t, rows, ds.name)
+    q_raw, tau_raw = rows["q"], rows["tau"]
+    h = float(np.mean(np.diff(t)))
+    sig_q = angle_noise(q_raw)
+    f_m = motion_band(q_raw, h, sig_q)
     nyq = 0.5 / (h * decimate)
-    if not 0 < fc < 0.9 * nyq:
-        raise DataError(f"{ds.name}: the low-pass cutoff {fc:.3g} Hz must lie below 0.9 x the Nyquist frequency "
-                        f"{nyq:.3g} Hz{' after decimation' if decimate > 1 else ''} (options.filter_cutoff_hz, options.decimate)")
-    q, qd, qdd = filtered_derivatives(a["q"], h, fc)
+    if cutoff_hz in (None, "auto"):
+        fc, cut = choose_cutoff(q_raw, h, qd=rows.get("qd"), factor=CUTOFF_FACTOR, decimate=decimate,
+                                limit=CUTOFF_LIMIT)
+        f_b = fc / CUTOFF_FACTOR  # the band the cutoff stands for (the motion band, or the fallback's)
+    else:
+        fc, cut, f_b = float(cutoff_hz), {"method": "given (options.filter_cutoff_hz)", "nyquist_hz": nyq}, f_m
+        if not 0 < fc < 0.9 * nyq:
+            raise DataError(f"{ds.name}: the low-pass cutoff {fc:.3g} Hz must lie below 0.9 x the Nyquist frequency "
+                            f"{nyq:.3g} Hz of this record{' after decimation' if decimate > 1 else ''} "
+                            "(options.filter_cutoff_hz, options.decimate; filter_cutoff_hz: auto chooses a cutoff per "
+                            "record)")
+
+    def derive(qr, qdr=None):
+        if qdr is None:
+            return filtered_derivatives(qr, h, fc)
+        qf, qdf = zero_phase_lowpass(qr, h, fc), zero_phase_lowpass(qdr, h, fc)
+        return qf, qdf, np.gradient(qdf, h, axis=0)
+
+    sig_qd = angle_noise(rows["qd"]) if velocity_only else None
+    q, qd, qdd = derive(q_raw, rows.get("qd"))
     tau = zero_phase_lowpass(tau_raw, h, fc)
-    # noise of the filtered torque: the raw torque's PSD above the motion (measured), extrapolated
-    # flat below 1.5 f_m, times the filter's power gain
+    # noise of the filtered torque: the raw torque's PSD above the band (measured), extrapolated
+    # flat below 1.5 x the band, times the filter's power gain
+    f_m_report = f_m
+    f_m = f_b
     level, f, P = band_noise_psd(tau_raw, h, NOISE_BAND[0] * f_m, NOISE_BAND[1] * f_m)
     g = lowpass_power_gain(f, h, fc)
     df = f[1] - f[0]
@@ -146,7 +176,8 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     F, Y = (np.asarray(v) for v in _rigid_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
     dev = []
     for _ in range(NOISE_DRAWS):
-        qk, qdk, qddk = filtered_derivatives(a["q"] + sig_q * rng.standard_normal(a["q"].shape), h, fc)
+        qk, qdk, qddk = derive(q_raw + sig_q * rng.standard_normal(q_raw.shape),
+                               None if sig_qd is None else rows["qd"] + sig_qd * rng.standard_normal(q_raw.shape))
         dev.append(np.asarray(_id_batch(robot, jnp.asarray(qk), jnp.asarray(qdk), jnp.asarray(qddk))) - F)
     var_q = np.mean([d.var(axis=0) for d in dev], axis=0)
     k = int(decimate)
@@ -156,16 +187,20 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
         raise DataError(f"{ds.name}: field 't': the record ({t[-1] - t[0]:.3g} s) is too short for its low-pass at "
                         f"{fc:.3g} Hz, whose transients take {edge * h:.3g} s at each end")
     sl = slice(edge, t.size - edge, k)
-    processing = {"angle_noise_rad": sig_q.tolist(), "motion_band_hz": f_m, "cutoff_hz": fc, "decimate": k,
-                  "trimmed_s": edge * h,
+    processing = {"angle_noise_rad": sig_q.tolist(), "motion_band_hz": f_m_report, "cutoff_hz": fc, "decimate": k,
+                  "cutoff_method": cut["method"], "cutoff": cut, "sampling": sampling,
+                  "derivatives": "velocities filtered, then differentiated" if velocity_only else
+                  "angles filtered, then differentiated twice", "trimmed_s": edge * h,
                   "torque_noise_nm": np.sqrt(var_tau).tolist(), "propagated_angle_noise_nm": np.sqrt(var_q).tolist()}
     return TorqueSet(ds.name, t[sl], q[sl], qd[sl], qdd[sl], tau[sl], F[sl], np.maximum(tau[sl].std(axis=0), 1e-9), Y[sl],
-                     a["q_extra"][sl], ds.extra_joints, robot, cutoff=fc, noise=np.sqrt(var_tau + var_q),
+                     rows["q_extra"][sl], ds.extra_joints, robot, cutoff=fc, noise=np.sqrt(var_tau + var_q),
                      processing=processing)
 
 
 def shift(X, t, d):
-    """``S_d X``: the signal delayed by ``d`` [s] (linear interpolation; the first samples hold)."""
+    """``S_d X``: the signal delayed by ``d`` [s], of either sign (negative: advanced), by linear
+    interpolation; the samples the shift leaves without data hold the record's first value (``d >
+    0``) or its last (``d < 0``)."""
     if d == 0:
         return X
     flat = X.reshape(X.shape[0], -1)
@@ -215,6 +250,13 @@ class TorqueTerm:
     def contribute(self, parts, theta) -> None:
         """Add the fitted effect to a simulation model's parts (:class:`._effect_term.FamilyCoefficients`);
         the default: the effect acts on what a sensor reads, not on the motion, and is not simulated."""
+
+    def implausible(self, theta, sets) -> str | None:
+        """A sentence naming a fitted parameter (coefficient ``theta`` or held hyper-parameter) that
+        lies outside the range a machine can have, given the training ``sets`` (their torque
+        spread, rates, sample time), with its value and the range; None when all are plausible.
+        Default: no range known."""
+        return None
 
 
 @dataclasses.dataclass

@@ -16,16 +16,21 @@ from __future__ import annotations
 import dataclasses
 from typing import ClassVar
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import _rnea
 from ..identify._signal import motion_band, zero_phase_lowpass
+from ..effects._linear import CandidateInfo, DataScale, on_register, registered_candidates
 from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
 from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, predict
 
-DELAYS = tuple(np.round(np.arange(0.001, 0.0605, 0.001), 4))  # [s] grid of sensor delays
+# [s] grid of sensor delays, of either sign: the torque lagging the angles (d > 0), or the encoders
+# lagging the torque (d < 0: a position read by a slower bus, or stamped at the end of a cycle)
+DELAYS = tuple(np.round(np.concatenate([np.arange(0.001, 0.0605, 0.001), -np.arange(0.001, 0.0605, 0.001)]), 4))
+DELAY_PLAUSIBLE = 0.05  # [s] a sensor's delay is a few samples to tens of milliseconds
 
 
 def first_order_zero_phase(x, t, tau):
@@ -307,8 +312,9 @@ def fit_loaded_backlash(base_terms, base_delay, j, sets, inertia=None):
 # --- a sensor's delay -------------------------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class SensorDelay(TorqueTerm):
-    """The torque measurement lagging the motion by ``hyper`` [s]: no coefficient, the fit's
-    ``delay`` (the shift operator of :func:`._torque.fit_terms`), searched on :data:`DELAYS`."""
+    """The torque measurement lagging the motion by ``hyper`` [s] (negative: the angles lag the
+    torque): no coefficient, the fit's ``delay`` (the shift operator of :func:`._torque.fit_terms`),
+    searched on :data:`DELAYS`."""
 
     joint: None = None
     hyper: float | None = None
@@ -352,9 +358,14 @@ class Kind:
     per_joint: bool = True
     subsumed_by: str | None = None
     signature: str = ""
+    placements: object = None  # callable(n) -> the joints it is tried at (None: every joint)
 
     def __call__(self, joint=None, hyper=None) -> TorqueTerm:
         return self.make(joint, hyper)
+
+    def joints(self, n: int):
+        """The joints (indices) of an ``n``-joint robot it is tried at."""
+        return range(n) if self.placements is None else list(self.placements(n))
 
 
 def _law(name) -> Kind:
@@ -381,3 +392,130 @@ KINDS["joint_flexibility"] = Kind(lambda joint, hyper: CompliantJoint(joint), 2,
 def make_term(name: str, joint=None, hyper=None) -> TorqueTerm:
     """The torque term of candidate ``name`` at ``joint`` (hyper-parameter ``hyper``, else its default)."""
     return KINDS[name](joint, hyper)
+
+
+# --- effects that offer themselves as candidates (jflex.effects.register_candidate) ------------------
+def data_scale(sets) -> DataScale:
+    """What plausible ranges are relative to (:class:`jflex.effects.DataScale`), over the torque sets."""
+    cat = lambda name: np.concatenate([getattr(s, name) for s in sets])
+    dt = min(float(np.median(np.diff(s.t))) for s in sets)
+    sc = DataScale.of(np.array([0.0, dt]), cat("qd"), cat("qdd"), cat("tau"))
+    return sc
+
+
+@eqx.filter_jit
+def _effect_columns(effect, robot, q, qd, qdd):
+    return jax.vmap(lambda a, b, c: effect.regressor(robot, a, b, c))(q, qd, qdd)
+
+
+@dataclasses.dataclass(frozen=True)
+class RegisteredTerm(TorqueTerm):
+    """A candidate effect class of :mod:`jflex.effects` that registered itself
+    (:func:`jflex.effects.register_candidate`), at the placement whose first joint is ``joint``;
+    ``hyper`` its held nonlinear parameter (searched on the class's grid). Its columns are the
+    effect's own regressor (the Jacobian of the torque its law adds)."""
+
+    effect: str
+    joint: int | None = None
+    hyper: object = None
+
+    @property
+    def info(self) -> CandidateInfo:
+        return registered_candidates()[self.effect].candidate
+
+    @property
+    def signature(self) -> str:
+        return self.info.signature
+
+    def group(self, n: int) -> tuple:
+        """The joint indices of its placement on an ``n``-joint robot."""
+        info = self.info
+        if info.per_joint_law:
+            return (self.joint,)
+        hit = [g for g in info.placements(n) if g[0] == self.joint]
+        if hit:
+            return tuple(hit[0])
+        # placed by the user (a nominal effect) where the class does not try it: the next joints
+        return tuple(range(min(self.joint, n - info.size), min(self.joint, n - info.size) + info.size))
+
+    def build(self, robot, joints=None):
+        names = tuple(robot.joint_names)
+        return self.info.build(tuple(names[j] for j in (self.group(len(names)) if joints is None else joints)), self.hyper)
+
+    def param_names(self):
+        proto = self.info.build(tuple(f"_{i}" for i in range(self.info.size)), self.hyper)
+        owners = proto.parameter_owners(None)
+        leaves = [a for a in proto.linear_leaves for _ in range(int(np.prod(np.shape(getattr(proto, a)))))]
+        return [(o.split(":", 1)[1] + "." if ":" in o else "") + f"{a} [{u}]"
+                for o, a, u in zip(owners, leaves, proto.parameter_units())]
+
+    def bounds(self):
+        lo = 0.0 if self.info.nonnegative else -np.inf
+        return [lo] * self.n_params, [np.inf] * self.n_params
+
+    def label(self, joint_names) -> str:
+        if self.joint is None or self.info.per_joint_law:
+            return super().label(joint_names)
+        return f"{self.effect}@" + "+".join(joint_names[j] for j in self.group(len(joint_names)))
+
+    def columns(self, s: TorqueSet) -> np.ndarray:
+        robot, n = s.robot, s.q.shape[1]
+        whole = self.info.per_joint_law  # one effect on every joint gives every placement's columns
+        key = ("registered", self.effect, None if whole else self.group(n), self.hyper)
+        if key not in s.cache:
+            eff = self.build(robot, tuple(range(n)) if whole else None)
+            Y = np.asarray(_effect_columns(eff, robot, *(jnp.asarray(a) for a in (s.q, s.qd, s.qdd))))
+            s.cache[key] = (Y, np.asarray(eff.parameter_joints(robot)))
+        Y, owner = s.cache[key]
+        return Y[:, :, owner == self.joint] if whole else Y
+
+    def parameters(self, theta) -> dict:
+        out = super().parameters(theta)
+        if self.info.hyper is not None:
+            out[self.info.hyper[1]] = float(self.hyper)
+        return out
+
+    def search(self, base_terms, base_delay, sets, inertia=None):
+        if self.info.hyper is None:
+            return super().search(base_terms, base_delay, sets, inertia)
+        fits = [fit_terms(tuple(base_terms) + (dataclasses.replace(self, hyper=v),), base_delay, sets, inertia)
+                for v in self.info.hyper[0]]
+        return min(fits, key=lambda f: f.cost)
+
+    def contribute(self, parts, theta) -> None:
+        parts.extra.append(self.build(parts.robot).with_parameters(np.asarray(theta, float)))
+
+    def implausible(self, theta, sets):
+        if not sets:
+            return None
+        robot = sets[0].robot
+        return self.build(robot).implausible(robot, theta, data_scale(sets))
+
+
+def _registered(cls) -> None:
+    info = cls.candidate
+
+    def make(joint, hyper):
+        return RegisteredTerm(info.name, joint, info.hyper[2] if hyper is None and info.hyper is not None else hyper)
+
+    proto = RegisteredTerm(info.name, 0, None if info.hyper is None else info.hyper[2])
+    KINDS[info.name] = Kind(make, proto.n_params + int(info.hyper is not None), signature=info.signature,
+                            placements=lambda n: [g[0] for g in info.placements(n)])
+
+
+on_register(_registered)
+
+
+def implausible(problem, cand, state) -> str | None:
+    """Why the fitted parameters of candidate ``cand`` (:class:`._problem.Candidate`) in ``state``
+    are ones no machine has (:meth:`._torque.TorqueTerm.implausible` on the training torque sets),
+    else None: the diagnosis reports such a fit and does not name it."""
+    tfit = getattr(state, "tfit", None)
+    if tfit is None:
+        return None
+    k = 0
+    for t in tfit.terms:
+        if t.effect == cand.effect and t.joint == cand.joint:
+            return t.implausible(np.asarray(tfit.theta[k:k + t.n_params]), problem.ttrain)
+        k += t.n_params
+    return None

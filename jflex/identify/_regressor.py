@@ -32,6 +32,11 @@ class Regressor(eqx.Module):
       ``tau_GC = sum_k B_k cos(k q_joint)`` acting as an external torque (Eq. 2.11), so its
       columns are ``-cos(k q)``; ``None`` for none.
     - ``coulomb_width`` [rad/s]: when > 0, ``sign`` is replaced by ``tanh(qd / width)``.
+
+    **Field (a pytree):** ``effects``: :class:`jflex.effects.AbstractLinearEffect` effects (a torque
+    offset, direction-dependent Coulomb friction, a coupled drive, ...) whose coefficients are
+    identified too: their columns (the effect's own regressor) follow the groups above, in order,
+    named ``owner.leaf`` (e.g. ``joint3.offset``); the values they hold are irrelevant to the columns.
     """
 
     viscous: bool = eqx.field(static=True, default=True)
@@ -39,10 +44,12 @@ class Regressor(eqx.Module):
     armature: bool = eqx.field(static=True, default=False)
     compensator: tuple[int, int] | None = eqx.field(static=True, default=None)
     coulomb_width: float = eqx.field(static=True, default=0.0)
+    effects: tuple = ()
 
     def n_params(self, n: int) -> int:
         """Number of standard parameters for an ``n``-joint robot."""
         k = self.compensator[1] if self.compensator else 0
+        k += sum(int(np.size(e.parameters())) for e in self.effects)
         return 10 * n + n * (int(self.viscous) + int(self.coulomb) + int(self.armature)) + k
 
     def names(self, robot: Robot) -> tuple[str, ...]:
@@ -54,6 +61,8 @@ class Regressor(eqx.Module):
         if self.compensator:
             j, k = self.compensator
             out += [f"{robot.joint_names[j]}.B{i + 1}" for i in range(k)]
+        for e in self.effects:
+            out += list(e.parameter_names(robot))
         return tuple(out)
 
     def vector(self, robot: Robot, *, fv=None, fc=None, armature=None, compensator=None):
@@ -67,6 +76,8 @@ class Regressor(eqx.Module):
         if self.compensator:
             k = self.compensator[1]
             parts.append(jnp.zeros(k) if compensator is None else jnp.asarray(compensator, dtype=float).reshape(k))
+        # the effects' coefficients as they hold them
+        parts += [jnp.asarray(e.parameters(), dtype=float) for e in self.effects]
         return jnp.concatenate(parts)
 
     def __call__(self, robot: Robot, q, qd, qdd):
@@ -88,6 +99,7 @@ class Regressor(eqx.Module):
             j, k = self.compensator
             c = -jnp.cos(jnp.arange(1, k + 1) * q[j])
             cols.append(jnp.zeros((n, k), dtype=cols[0].dtype).at[j].set(c))
+        cols += [e.regressor(robot, q, qd, qdd) for e in self.effects]
         return jnp.concatenate(cols, axis=1)
 
     def stack(self, robot: Robot, q, qd, qdd):
