@@ -30,8 +30,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from . import _coupling as cp
 from . import _scalar as s
-from ._checks import checked_arrays as _checked, guard, has_inertia, moving_inertia
+from ._checks import guard, has_inertia, moving_inertia
+from ._coupling import checked as _checked
 from ._robot import PRISMATIC, Robot
 from ._tree import consts, transform
 
@@ -217,6 +219,10 @@ def rnea_derivatives(robot: Robot, q, qd, qdd, f_ext=None):
     """
     has_inertia("rnea_derivatives", robot)
     q, qd, qdd, f_ext = _checked("rnea_derivatives", robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
+    if cp.coupled(robot):  # tau = G^T tau_tree(G q + b, G qd, G qdd): G^T D G for each
+        G = cp.matrix(robot)
+        full = rnea_derivatives(cp.tree(robot), cp.positions(robot, q), cp.rates(robot, qd), cp.rates(robot, qdd), f_ext)
+        return tuple(G.T @ D @ G for D in full)
     dq, dv, M, _, _ = _kernel(robot, q, qd, qdd, f_ext)
     dt = _dtype()
     return _matrix(dq, dt), _matrix(dv, dt), _matrix(M, dt)
@@ -272,6 +278,8 @@ def aba_derivatives(robot: Robot, q, qd, tau, f_ext=None):
     time inside ``jit``).
     """
     fn = "aba_derivatives"
+    if cp.coupled(robot):
+        return _coupled_aba_derivatives(robot, q, qd, tau, f_ext)
     moving_inertia(fn, robot)
     q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
     n = robot.nq
@@ -284,3 +292,19 @@ def aba_derivatives(robot: Robot, q, qd, tau, f_ext=None):
     out = guard(out, [~jnp.all(jnp.isfinite(s.stack([L[i][i] for i in range(n)], dt)))], [
         f"{fn}: the mass matrix is not positive definite (a joint moves no inertia?); check robot.inertia"])
     return out[0], out[1], out[2]
+
+
+def _coupled_aba_derivatives(robot: Robot, q, qd, tau, f_ext):
+    """:func:`aba_derivatives` of a robot with coupled joints: ``qdd`` by the coupled mass matrix,
+    then ``d qdd = -M^-1 d tau_rnea`` at that ``qdd`` with the coupled inverse-dynamics derivatives."""
+    from ._dynamics import _fd_crba
+
+    fn = "aba_derivatives"
+    has_inertia(fn, robot)
+    q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
+    qdd = _fd_crba(robot, q, qd, tau, f_ext, fn)
+    dq, dv, M = rnea_derivatives(robot, q, qd, qdd, f_ext)
+    L = jnp.linalg.cholesky(M)
+    X = jax.scipy.linalg.cho_solve((L, True), jnp.concatenate([dq, dv, jnp.eye(robot.nq, dtype=M.dtype)], axis=1))
+    n = robot.nq
+    return -X[:, :n], -X[:, n : 2 * n], X[:, 2 * n :]

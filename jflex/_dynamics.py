@@ -14,9 +14,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _coupling as cp
 from . import _scalar as s
 from . import _spatial as sp
-from ._checks import checked_arrays as _checked
+from ._coupling import checked as _checked
 from ._checks import guard, has_inertia, moving_inertia
 from ._derivatives import _kernel, _matrix, aba_derivatives
 from ._errors import ParameterError
@@ -35,9 +36,12 @@ def forward_kinematics(robot: Robot, q):
 
     **Arguments:** ``q`` (n,) joint positions [rad | m].
 
-    **Returns:** (n, 4, 4) homogeneous transforms of the body frames in the base frame.
+    **Returns:** (n, 4, 4) homogeneous transforms of the body frames in the base frame (one per
+    joint of the tree, coupled joints included).
     """
     (q,) = _checked("forward_kinematics", robot, q=q)
+    if cp.coupled(robot):
+        robot, q = cp.tree(robot), cp.positions(robot, q)
     ls = walk(robot, consts(robot, inertia=False), q, world=True)
     dt = _dtype()
     return jnp.stack([sp.homogeneous(R.array().astype(dt), p.array().astype(dt)) for R, p in zip(ls.oR, ls.op)])
@@ -57,6 +61,8 @@ def _frame_pose(robot: Robot, ls, frame):
 def frame_placement(robot: Robot, q, frame):
     """World placement (4, 4) of a named frame (link, joint or extra frame such as a tool)."""
     (q,) = _checked("frame_placement", robot, q=q)
+    if cp.coupled(robot):
+        robot, q = cp.tree(robot), cp.positions(robot, q)
     _, R, p = _frame_pose(robot, walk(robot, consts(robot, inertia=False), q, world=True), frame)
     dt = _dtype()
     return sp.homogeneous(R.array().astype(dt), p.array().astype(dt))
@@ -76,8 +82,10 @@ def jacobian(robot: Robot, q, frame, reference: str = "local_world_aligned"):
     **Returns:** (6, n).
     """
     if reference not in _REFERENCES:
-        raise ValueError(f"jacobian: reference must be one of {_REFERENCES}, got '{reference}'")
+        raise ParameterError(f"jacobian: reference must be one of {_REFERENCES}, got '{reference}'")
     (q,) = _checked("jacobian", robot, q=q)
+    if cp.coupled(robot):  # a coupled joint's column adds to its leader's, times the multiplier
+        return jacobian(cp.tree(robot), cp.positions(robot, q), frame, reference) @ cp.matrix(robot)
     c = consts(robot, inertia=False)
     ls = walk(robot, c, q, world=True)
     body, oR_f, op_f = _frame_pose(robot, ls, frame)
@@ -135,6 +143,9 @@ def rnea(robot: Robot, q, qd, qdd, f_ext=None):
     """
     has_inertia("rnea", robot)
     q, qd, qdd, f_ext = _checked("rnea", robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
+    if cp.coupled(robot):  # tau = G^T tau_tree (virtual work)
+        full = rnea(cp.tree(robot), cp.positions(robot, q), cp.rates(robot, qd), cp.rates(robot, qdd), f_ext)
+        return cp.project(robot, full)
     return (_rnea_analytic if _concrete(robot) else _rnea_core)(robot, q, qd, qdd, f_ext)
 
 
@@ -144,6 +155,9 @@ def _rnea(robot: Robot, q, qd, qdd, f_ext, fn, check=True):
     checked the arguments."""
     if check:
         q, qd, qdd, f_ext = _checked(fn, robot, q=q, qd=qd, qdd=qdd, f_ext=f_ext)
+    if cp.coupled(robot):
+        full = _rnea_core(cp.tree(robot), cp.positions(robot, q), cp.rates(robot, qd), cp.rates(robot, qdd), f_ext)
+        return cp.project(robot, full)
     return _rnea_core(robot, q, qd, qdd, f_ext)
 
 
@@ -258,6 +272,9 @@ def _crba(robot: Robot, q, fn, check=True):
     """:func:`crba` without the inertia check (see :func:`_rnea`)."""
     if check:
         (q,) = _checked(fn, robot, q=q)
+    if cp.coupled(robot):  # M = G^T M_tree G
+        G = cp.matrix(robot)
+        return G.T @ _crba(cp.tree(robot), cp.positions(robot, q), fn, check=False) @ G
     n = robot.nq
     c = consts(robot)
     ls = walk(robot, c, q)
@@ -486,7 +503,12 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
     robot traced both are run-time errors with the same messages.
 
     Forward-mode derivatives in ``q``, ``qd``, ``tau`` come from :func:`jflex.aba_derivatives` (a
-    custom JVP, as :func:`rnea`'s)."""
+    custom JVP, as :func:`rnea`'s).
+
+    A robot with coupled (mimic) joints is solved by the mass matrix and a Cholesky factorisation
+    (``method="crba"`` of :func:`forward_dynamics`): the recursion has no coordinate per body."""
+    if cp.coupled(robot):
+        return _fd_crba(robot, q, qd, tau, f_ext, "aba")
     moving_inertia("aba", robot)
     q, qd, tau, f_ext = _checked("aba", robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
     return (_aba_analytic if _concrete(robot) else lambda *a: _aba_core(*a, "aba"))(robot, q, qd, tau, f_ext)
@@ -496,6 +518,8 @@ _aba_analytic = _state_derivative(lambda *a: _aba_core(*a, "aba"), aba_derivativ
 
 
 def _aba(robot: Robot, q, qd, tau, f_ext, fn):
+    if cp.coupled(robot):
+        return _fd_crba(robot, q, qd, tau, f_ext, fn)
     moving_inertia(fn, robot)
     q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
     return _aba_core(robot, q, qd, tau, f_ext, fn)
@@ -567,14 +591,22 @@ def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):
 
     ``method="aba"`` (default: the articulated-body algorithm, O(n); for the 7-joint Panda in
     ``benchmarks/bench_dynamics.py`` it was faster at batch 1e3, 1.04 against 1.35 us, and even
-    at 1e5) or ``"crba"`` (mass matrix and Cholesky solve).
+    at 1e5) or ``"crba"`` (mass matrix and Cholesky solve; what either gives for a robot with
+    coupled joints).
     """
+    if not isinstance(method, str) or method not in ("aba", "crba"):
+        raise ParameterError(f"forward_dynamics: method must be 'aba' or 'crba', got {method!r}")
     if method == "aba":
         return _aba(robot, q, qd, tau, f_ext, "forward_dynamics")
-    if method != "crba":
-        raise ValueError(f"forward_dynamics: method must be 'aba' or 'crba', got '{method}'")
-    fn = "forward_dynamics (method='crba')"
-    moving_inertia(fn, robot)
+    return _fd_crba(robot, q, qd, tau, f_ext, "forward_dynamics (method='crba')")
+
+
+def _fd_crba(robot: Robot, q, qd, tau, f_ext, fn):
+    """``qdd = M^-1 (tau - h)`` by the mass matrix and a Cholesky solve."""
+    if cp.coupled(robot):  # a joint of the tree moving no inertia may still leave G^T M G regular
+        has_inertia(fn, robot)
+    else:
+        moving_inertia(fn, robot)
     q, qd, tau, f_ext = _checked(fn, robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
     M = _crba(robot, q, fn, check=False)
     h = _rnea(robot, q, qd, jnp.zeros_like(qd), f_ext, fn, check=False)
@@ -589,12 +621,16 @@ _UNIT_PARAMS = [s.Inertia.of([1.0 if j == k else 0.0 for j in range(10)]) for k 
 
 
 def regressor(robot: Robot, q, qd, qdd):
-    """Joint-torque regressor Y (n, 10 n) with ``rnea(q, qd, qdd) == Y @ robot.inertia.ravel()``.
+    """Joint-torque regressor Y (nq, 10 n) with ``rnea(q, qd, qdd) == Y @ robot.inertia.ravel()``
+    (``n`` links, one per joint of the tree; ``nq = n`` unless joints are coupled).
 
     Parameters per link in Pinocchio's order ``[m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz,
     I_yz, I_zz]``, inertia about the body-frame origin.
     """
     q, qd, qdd = _checked("regressor", robot, q=q, qd=qd, qdd=qdd)
+    if cp.coupled(robot):  # Y = G^T Y_tree
+        full = regressor(cp.tree(robot), cp.positions(robot, q), cp.rates(robot, qd), cp.rates(robot, qdd))
+        return cp.project(robot, full)
     n = robot.nq
     c = consts(robot, inertia=False)
     ls = walk(robot, c, q, qd, qdd)
@@ -622,6 +658,8 @@ def regressor(robot: Robot, q, qd, qdd):
 def kinetic_energy(robot: Robot, q, qd):
     """Kinetic energy [J]: sum over bodies of v^T I v / 2."""
     q, qd = _checked("kinetic_energy", robot, q=q, qd=qd)
+    if cp.coupled(robot):
+        robot, q, qd = cp.tree(robot), cp.positions(robot, q), cp.rates(robot, qd)
     c = consts(robot)
     ls = walk(robot, c, q, qd)
     T = 0.0
@@ -634,6 +672,8 @@ def kinetic_energy(robot: Robot, q, qd):
 def potential_energy(robot: Robot, q):
     """Gravitational potential energy [J] relative to the base origin: -sum m g . c."""
     (q,) = _checked("potential_energy", robot, q=q)
+    if cp.coupled(robot):
+        robot, q = cp.tree(robot), cp.positions(robot, q)
     c = consts(robot)
     ls = walk(robot, c, q, world=True)
     V = 0.0

@@ -38,6 +38,13 @@ class Robot(eqx.Module):
     - ``lower``, ``upper`` (n,) [rad or m]; ``velocity_limit`` (n,); ``effort_limit`` (n,).
     - ``frame_names``, ``frame_parents`` (static): extra named frames (tool, merged links) on body
       ``frame_parents[k]`` (``-1``: base) at ``frame_R[k], frame_p[k]``.
+    - ``mimic`` (static), ``mimic_multiplier``, ``mimic_offset`` (n,): coupled joints (a URDF's
+      ``<mimic>``), empty / ``None`` for a robot without them. ``mimic[i] = k >= 0``: joint ``i``
+      has no coordinate of its own and moves at ``mimic_multiplier[i] * q_k + mimic_offset[i]``
+      with its leader ``k``, an independent joint (``-1``). As in Pinocchio, the coordinates ``q``
+      are the independent joints in tree order (:attr:`coordinate_names`, ``nq`` of them) while
+      ``joint_names``, the leaves above, forward kinematics and ``f_ext`` run over every joint of the
+      tree (:attr:`n_joints`).
     """
 
     placement_R: jnp.ndarray
@@ -58,6 +65,9 @@ class Robot(eqx.Module):
     frame_names: tuple[str, ...] = eqx.field(static=True, default=())
     frame_parents: tuple[int, ...] = eqx.field(static=True, default=())
     base_name: str = eqx.field(static=True, default="base")
+    mimic: tuple[int, ...] = eqx.field(static=True, default=())
+    mimic_multiplier: jnp.ndarray | None = None
+    mimic_offset: jnp.ndarray | None = None
 
     def __check_init__(self):
         n = len(self.parents)
@@ -74,15 +84,40 @@ class Robot(eqx.Module):
                 raise ShapeError(f"Robot: joint '{self.joint_names[i]}' has type '{t}', expected one of {JOINT_TYPES}")
         if len(set(self.joint_names)) != n:
             raise ShapeError("Robot: joint names must be unique")
+        if self.mimic:
+            if len(self.mimic) != n or self.mimic_multiplier is None or self.mimic_offset is None:
+                raise ShapeError("Robot: mimic needs one entry per joint, with mimic_multiplier and mimic_offset")
+            for i, k in enumerate(self.mimic):
+                if k >= 0 and (k >= n or k == i or self.mimic[k] >= 0):
+                    raise ShapeError(
+                        f"Robot: joint '{self.joint_names[i]}' mimics index {k}; a leader must be another joint "
+                        "of the robot that mimics none"
+                    )
+            if all(k < 0 for k in self.mimic):
+                raise ShapeError("Robot: mimic lists no coupled joint; leave it empty")
+        elif self.mimic_multiplier is not None or self.mimic_offset is not None:
+            raise ShapeError("Robot: mimic_multiplier and mimic_offset need mimic")
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints (bodies) of the tree, coupled ones included."""
+        return len(self.parents)
 
     @property
     def nq(self) -> int:
-        """Number of joint coordinates."""
-        return len(self.parents)
+        """Number of joint coordinates: the joints, less those that mimic another."""
+        return len(self.parents) - sum(k >= 0 for k in self.mimic)
 
     @property
     def nv(self) -> int:
-        return len(self.parents)
+        return self.nq
+
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        """The joints that carry a coordinate of ``q``, in order (``joint_names`` without mimic joints)."""
+        if not self.mimic:
+            return self.joint_names
+        return tuple(nm for nm, k in zip(self.joint_names, self.mimic) if k < 0)
 
     def frame_index(self, frame: int | str) -> tuple[int, int]:
         """Resolve a frame (link index, link name, joint name or extra frame name) statically.
@@ -91,8 +126,8 @@ class Robot(eqx.Module):
         when the frame is the body frame itself.
         """
         if isinstance(frame, (int, np.integer)):
-            if not 0 <= int(frame) < self.nq:
-                raise ShapeError(f"frame index {frame} out of range for a robot with {self.nq} links")
+            if not 0 <= int(frame) < self.n_joints:
+                raise ShapeError(f"frame index {frame} out of range for a robot with {self.n_joints} links")
             return int(frame), -1
         if frame in self.link_names:
             return self.link_names.index(frame), -1
@@ -131,11 +166,14 @@ def make_robot(
     frame_p=None,
     base_name: str = "base",
     check_physical: bool = True,
+    mimic: Sequence[tuple[str, str, float, float]] = (),
 ) -> Robot:
     """Build a :class:`Robot`, validating shapes and physical consistency (named errors).
 
     ``check_physical=False`` skips the physical-consistency check of the inertias (a builder that
-    checked them itself, e.g. :func:`load_urdf`, which loads vendor inertias with a warning)."""
+    checked them itself, e.g. :func:`load_urdf`, which loads vendor inertias with a warning).
+    ``mimic``: ``(joint, leader, multiplier, offset)`` per coupled joint, by name: ``joint`` moves at
+    ``multiplier * q_leader + offset`` and has no coordinate of its own (see :class:`Robot`)."""
     n = len(parents)
     def arr(x, shape, field):
         a = np.asarray(x, dtype=float)
@@ -165,6 +203,7 @@ def make_robot(
     for i in range(n):
         if lo[i] > hi[i]:
             raise ParameterError(f"joint '{joint_names[i]}': lower limit {lo[i]} exceeds upper limit {hi[i]}")
+    lead, mult, off = _coupling(list(joint_names), mimic)
     return Robot(
         placement_R=jnp.asarray(arr(placement_R, (n, 3, 3), "placement_R")),
         placement_p=jnp.asarray(arr(placement_p, (n, 3), "placement_p")),
@@ -184,7 +223,44 @@ def make_robot(
         frame_names=tuple(frame_names),
         frame_parents=tuple(int(p) for p in frame_parents),
         base_name=base_name,
+        mimic=lead,
+        mimic_multiplier=mult,
+        mimic_offset=off,
     )
+
+
+def _coupling(names, mimic):
+    """(mimic, multiplier, offset) fields of :class:`Robot` from ``(joint, leader, multiplier,
+    offset)`` tuples; a leader that mimics a third joint is followed to the independent one."""
+    if not mimic:
+        return (), None, None
+    n = len(names)
+    spec = {}
+    for entry in mimic:
+        if len(entry) != 4:
+            raise ShapeError(f"Robot.mimic: expected (joint, leader, multiplier, offset), got {entry!r}")
+        j, lead, a, b = entry
+        for nm in (j, lead):
+            if nm not in names:
+                raise ShapeError(f"Robot.mimic: unknown joint '{nm}'; joints: {names}")
+        if j in spec:
+            raise ShapeError(f"Robot.mimic: joint '{j}' mimics twice")
+        a, b = float(a), float(b)
+        if not (np.isfinite(a) and np.isfinite(b)):
+            raise ParameterError(f"Robot.mimic: joint '{j}': multiplier and offset must be finite, got {a}, {b}")
+        spec[j] = (lead, a, b)
+    lead_idx, mult, off = [-1] * n, np.ones(n), np.zeros(n)
+    for j in spec:
+        a, b, k, seen = 1.0, 0.0, j, [j]
+        while k in spec:  # q_k = a_k q_leader + b_k, composed down the chain
+            k, ak, bk = spec[k]
+            a, b = a * ak, a * bk + b
+            if k in seen:
+                raise ShapeError(f"Robot.mimic: joints {seen} mimic each other in a cycle")
+            seen.append(k)
+        i = names.index(j)
+        lead_idx[i], mult[i], off[i] = names.index(k), a, b
+    return tuple(lead_idx), jnp.asarray(mult), jnp.asarray(off)
 
 
 def inertia_defect(pi, rtol: float = 1e-9) -> str | None:
@@ -229,11 +305,11 @@ def check_inertia(pi, where: str, rtol: float = 1e-9) -> None:
 
 
 def check_q(robot: Robot, q, name: str = "q"):
-    """Shape check before tracing: ``q`` must have one entry per joint (batches go through vmap)."""
+    """Shape check before tracing: ``q`` must have one entry per coordinate (batches go through vmap)."""
     shape = jnp.shape(q)
     if shape != (robot.nq,):
         raise ShapeError(
-            f"{name} must have shape ({robot.nq},) for this robot (joints {list(robot.joint_names)}), got {shape}; "
+            f"{name} must have shape ({robot.nq},) for this robot (joints {list(robot.coordinate_names)}), got {shape}; "
             "batch with jax.vmap or jflex.sweep"
         )
 

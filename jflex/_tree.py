@@ -174,7 +174,13 @@ def _arr(x, dtype):
 
 
 def forward_pass(robot: Robot, q, qd=None, qdd=None, base_acc=None) -> LinkStates:
-    """:func:`walk` with array outputs ((3, 3) rotations, (3,) vectors), world placements included."""
+    """:func:`walk` with array outputs ((3, 3) rotations, (3,) vectors), world placements included;
+    one entry per joint of the tree (a robot with coupled joints takes its coordinates)."""
+    if robot.mimic:
+        from . import _coupling as cp
+
+        rate = lambda x: None if x is None else cp.rates(robot, x)
+        robot, q, qd, qdd = cp.tree(robot), cp.positions(robot, q), rate(qd), rate(qdd)
     c = consts(robot, inertia=False)
     b = None if base_acc is None else s.V3.of(base_acc)
     ls = walk(robot, c, q, qd, qdd, b, world=True)

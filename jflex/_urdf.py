@@ -1,9 +1,10 @@
 """Robots from URDF files: joints, limits and inertials; fixed joints merged into their parent
 body (what they carried stays reachable as a named frame, e.g. a tool flange).
 
-The result matches ``pinocchio.buildModelFromUrdf(path)`` (fixed base, ``mimic=False``): the same
-joint order, the same merged bodies and, for every URDF that ships in example-robot-data, the same
-``rnea``, ``crba`` and ``aba`` (tests/test_urdf_parity.py). ``lock``/``joints`` reduce the model
+The result matches ``pinocchio.buildModelFromUrdf(path, mimic=True)`` (fixed base; mimic joints
+as coupled coordinates, or with ``mimic="independent"`` as ``mimic=False``): the same joint order,
+the same merged bodies and, for every URDF that ships in example-robot-data, the same ``rnea``,
+``crba``, forward dynamics, kinematics and Jacobians (tests/test_urdf_parity.py). ``lock``/``joints`` reduce the model
 as ``pinocchio.buildReducedModel`` does.
 """
 
@@ -123,7 +124,7 @@ def load_urdf(
     gravity=(0.0, 0.0, -9.81),
     lock: Mapping[str, float] | None = None,
     joints: Sequence[str] | None = None,
-    mimic: str = "refuse",
+    mimic: str = "coupled",
     floating: str | None = None,
     strict: bool = False,
 ) -> Robot:
@@ -141,11 +142,16 @@ def load_urdf(
 
     - ``lock``: ``{joint name: value}`` [rad or m]: these joints become fixed joints at that value,
       their links merged into the parent body (``pinocchio.buildReducedModel``).
-    - ``joints``: the joints to keep; every other moving joint is locked at its ``lock`` value, or
-      0 (a joint that mimics a locked joint: at ``multiplier * value + offset``).
-    - ``mimic``: ``"refuse"`` (default) raises for a kept joint with a ``<mimic>`` tag, whose
-      coupled coordinate jflex does not model (lock it, or both); ``"independent"`` loads it as an
-      independent joint, as ``pinocchio.buildModelFromUrdf(path)`` does by default.
+    - ``joints``: the joints to keep (each once); every other moving joint is locked at its
+      ``lock`` value, or 0 (a joint that mimics a locked joint: at ``multiplier * value + offset``;
+      one that mimics a kept joint stays coupled to it).
+    - ``mimic``: what to do with a joint whose ``<mimic joint multiplier offset>`` couples it to
+      a leader. ``"coupled"`` (default): it moves at ``multiplier * q_leader + offset`` and has no
+      coordinate of its own, as ``pinocchio.buildModelFromUrdf(path, mimic=True)`` models it
+      (``robot.nq`` counts the coordinates, ``robot.coordinate_names`` names them, while
+      ``robot.joint_names`` lists every joint of the tree); a joint that mimics a locked joint is
+      locked with it. ``"independent"`` loads it as an independent joint, as
+      ``pinocchio.buildModelFromUrdf(path)`` does by default; ``"refuse"`` raises for a kept one.
     - ``floating``: what to do with a ``floating`` or ``planar`` joint from the root link (a
       floating base written as a joint from ``world``): ``"fixed"`` welds it at its origin
       (the default, with a warning unless passed explicitly), ``"refuse"`` raises. Such joints
@@ -174,7 +180,7 @@ def from_urdf_string(
     name: str = "<string>",
     lock: Mapping[str, float] | None = None,
     joints: Sequence[str] | None = None,
-    mimic: str = "refuse",
+    mimic: str = "coupled",
     floating: str | None = None,
     strict: bool = False,
 ) -> Robot:
@@ -245,14 +251,42 @@ def _mimic_of(j, by_name, where):
         return None
     leader = el.get("joint")
     if leader not in by_name or by_name[leader].get("type") not in _MOVING:
-        raise URDFError(f"{where}: <mimic joint='{leader}'> must name a revolute, continuous or prismatic joint")
+        raise URDFError(
+            f"{where}: <mimic joint='{leader}'> must name a revolute, continuous or prismatic joint of this URDF; "
+            "mimic='independent' ignores <mimic> (as pinocchio.buildModelFromUrdf(path) does)"
+        )
     return leader, _attr_float(el, "multiplier", f"{where} <mimic>", 1.0), _attr_float(el, "offset", f"{where} <mimic>", 0.0)
 
 
+_MIMIC_MODES = ("coupled", "independent", "refuse")
+
+
+def _resolved_mimics(fname, by_name, moving):
+    """{follower: (leader, multiplier, offset)} with every leader an independent joint: a chain
+    (a mimics b mimics c) composes to ``q_a = a_ab a_bc q_c + (a_ab b_bc + b_ab)``."""
+    direct = {}
+    for k in moving:
+        m = _mimic_of(by_name[k], by_name, f"{fname}: joint '{k}'")
+        if m is not None:
+            direct[k] = m
+    out = {}
+    for k in direct:
+        a, b, lead, seen = 1.0, 0.0, k, [k]
+        while lead in direct:
+            lead, ak, bk = direct[lead]
+            a, b = a * ak, a * bk + b
+            if lead in seen:
+                raise URDFError(f"{fname}: joints {seen} mimic each other in a cycle")
+            seen.append(lead)
+        out[k] = (lead, a, b)
+    return out
+
+
 def _locked_values(fname, by_name, lock, joints, mimic):
-    """{joint name: value} of the moving joints that become fixed (``lock``/``joints``/``mimic``)."""
-    if mimic not in ("refuse", "independent"):
-        raise URDFError(f"{fname}: mimic must be 'refuse' or 'independent', got {mimic!r}")
+    """``({joint name: value}, {follower: (leader, multiplier, offset)})``: the moving joints that
+    become fixed (``lock``/``joints``/``mimic``) and the kept joints that mimic a kept leader."""
+    if not isinstance(mimic, str) or mimic not in _MIMIC_MODES:
+        raise URDFError(f"{fname}: mimic must be one of {list(_MIMIC_MODES)}, got {mimic!r}")
     moving = [k for k, j in by_name.items() if j.get("type") in _MOVING]
     lock = {} if lock is None else lock
     if not isinstance(lock, Mapping):
@@ -280,47 +314,63 @@ def _locked_values(fname, by_name, lock, joints, mimic):
                 raise URDFError(f"{fname}: lock['{name}'] = {x} lies outside the joint's limits [{lo}, {hi}]")
         values[name] = x
     keep = set(moving)
+    named = set()
     if joints is not None:
         if isinstance(joints, str) or not all(isinstance(k, str) for k in joints):
             raise URDFError(f"{fname}: joints must be a list of joint names, got {joints!r}")
         for name in joints:
             known(name, "joints")
+            if name in named:
+                raise URDFError(f"{fname}: joints names '{name}' twice; each joint once")
+            named.add(name)
             if name in values:
                 raise URDFError(f"{fname}: joint '{name}' is both kept (joints) and locked (lock)")
-        keep = set(joints)
+        keep = set(named)
     keep -= set(values)
     # 'independent' ignores <mimic> as Pinocchio does by default (it may even name a missing joint)
-    mimics = {k: None if mimic == "independent" else _mimic_of(by_name[k], by_name, f"{fname}: joint '{k}'") for k in moving}
-    # a joint that mimics a locked joint, and is not named itself, follows its leader's value
+    mimics = {} if mimic == "independent" else _resolved_mimics(fname, by_name, moving)
+    coupled = {}
     for name in moving:
-        m = mimics[name]
-        if name in values or m is None or m[0] in keep:
+        if name not in mimics or name in values:
             continue
-        if joints is None or name not in joints:
-            leader_value = values.get(m[0], 0.0)
-            values[name] = m[1] * leader_value + m[2]
+        leader, a, b = mimics[name]
+        if leader in keep:
+            # a follower moves with its kept leader (named in joints or not: it has no coordinate)
+            coupled[name] = mimics[name]
+            keep.add(name)
+        elif name in named and mimic == "coupled":
+            raise URDFError(
+                f"{fname}: joints names '{name}', which mimics joint '{leader}' (multiplier {a}, offset {b}) and has "
+                f"no coordinate of its own; '{leader}' is locked: keep '{leader}', or leave '{name}' out (it is then "
+                "locked with its leader)"
+            )
+        elif name not in named:
+            # a joint that mimics a locked joint, and is not named itself, follows its leader's value
+            values[name] = a * values.get(leader, 0.0) + b
             keep.discard(name)
     for name in moving:
         if name not in keep:
             values.setdefault(name, 0.0)
-    if mimic == "refuse":
-        for name in moving:
-            m = mimics[name]
-            if m is None or (name in values and m[0] in values):
-                continue
+    for name, (leader, a, b) in mimics.items():
+        if name in values and leader in values:
+            continue
+        if name in values or mimic == "refuse":  # locked while its leader moves, or kept coupled
             raise URDFError(
-                f"{fname}: joint '{name}' mimics joint '{m[0]}' (multiplier {m[1]}, offset {m[2]}); jflex does not "
-                f"model coupled coordinates. Lock both (lock={{'{m[0]}': 0.0}} locks '{name}' with it), or load "
-                "them as independent joints with mimic='independent' (Pinocchio's default)"
+                f"{fname}: joint '{name}' mimics joint '{leader}' (multiplier {a}, offset {b})"
+                + (" but is locked while its leader moves: the coupling would break. " if name in values else
+                   " and mimic='refuse'. ")
+                + f"Lock both (lock={{'{leader}': 0.0}} locks '{name}' with it), load them coupled with "
+                "mimic='coupled' (the default, as pinocchio.buildModelFromUrdf(path, mimic=True)), or as "
+                "independent joints with mimic='independent' (Pinocchio's default)"
             )
-    return values
+    return values, coupled
 
 
-def _from_element(root, fname, gravity, lock=None, joints=None, mimic="refuse", floating=None, strict=False) -> Robot:
+def _from_element(root, fname, gravity, lock=None, joints=None, mimic="coupled", floating=None, strict=False) -> Robot:
     links, by_name, children, root_link = _parse_tree(root, fname)
     if floating not in (None, "fixed", "refuse"):
         raise URDFError(f"{fname}: floating must be 'fixed' or 'refuse', got {floating!r}")
-    locked = _locked_values(fname, by_name, lock, joints, mimic)
+    locked, coupled = _locked_values(fname, by_name, lock, joints, mimic)
 
     # Depth-first walk. Each URDF link maps to (body index or -1 for the base, T link->body).
     joint_names, link_names, parents, types = [], [], [], []
@@ -335,77 +385,84 @@ def _from_element(root, fname, gravity, lock=None, joints=None, mimic="refuse", 
             raise URDFError(f"{where}: <axis xyz> must be non-zero")
         return axis / np.linalg.norm(axis)
 
-    def visit(link_name, body, T_body_link):
-        nonlocal base_params
+    def attach(child, j, body, T_body_joint):
+        """(body, T body->child link) for the link ``child`` reached from ``body`` through joint j
+        (origin applied): a new body for a moving joint, else the parent's body and a frame."""
+        jname = j.get("name")
+        where = f"{fname}: joint '{jname}'"
+        jtype = j.get("type")
+        if jtype in _FREE:
+            if body >= 0 or j.find("parent").get("link") != root_link:
+                raise URDFError(
+                    f"{where}: unknown or unsupported joint type '{jtype}' below the root link; jflex models "
+                    "fixed-base trees (a free joint from the root link, a floating base, is welded there)"
+                )
+            if floating == "refuse":
+                raise URDFError(
+                    f"{where}: a {jtype} joint from the root link (a floating base) and floating='refuse'; "
+                    "jflex models fixed-base trees: floating='fixed' welds it at its origin"
+                )
+            if floating is None:
+                warnings.warn(
+                    f"{where}: {jtype} joint from the root link welded at its origin: jflex models "
+                    "fixed-base trees (pass floating='fixed' to say so, or 'refuse')",
+                    UserWarning,
+                    stacklevel=4,
+                )
+        if jtype in _FREE or jtype == "fixed" or jname in locked:
+            if jname in locked:
+                T_motion = np.eye(4)
+                axis, v = axis_of(j, where), locked[jname]
+                if jtype == "prismatic":
+                    T_motion[:3, 3] = axis * v
+                else:
+                    T_motion[:3, :3] = np.asarray(rot_axis_angle(axis, v))
+                T_body_joint = T_body_joint @ T_motion
+            frame_names.append(child)
+            frame_parents.append(body)
+            frame_T.append(T_body_joint)
+            return body, T_body_joint
+        axis = axis_of(j, where)
+        lim = j.find("limit")
+        if jtype in ("revolute", "prismatic") and lim is None:
+            raise URDFError(f"{where}: a {jtype} joint needs a <limit lower upper effort velocity>")
+        if jtype == "continuous":
+            lo, hi = -np.inf, np.inf
+        else:
+            lo = _attr_float(lim, "lower", f"{where} <limit>", 0.0)
+            hi = _attr_float(lim, "upper", f"{where} <limit>", 0.0)
+            if lo > hi:
+                raise URDFError(f"{where}: <limit> lower {lo} > upper {hi}")
+        eff = _attr_float(lim, "effort", f"{where} <limit>", np.inf) if lim is not None else np.inf
+        vel = _attr_float(lim, "velocity", f"{where} <limit>", np.inf) if lim is not None else np.inf
+        idx = len(joint_names)
+        joint_names.append(jname)
+        link_names.append(child)
+        parents.append(body)
+        types.append(_MOVING[jtype])
+        Rs.append(T_body_joint[:3, :3])
+        ps.append(T_body_joint[:3, 3])
+        axes.append(axis)
+        inertia.append(np.zeros(10))
+        lims.append((lo, hi, vel, eff))
+        return idx, np.eye(4)
+
+    # Depth first, with an explicit stack (a long chain must not exhaust Python's recursion
+    # limit): each entry is a link reached through joint j (None for the root) from ``body``, whose
+    # frame sits at T_body_link once j's own motion is applied.
+    stack = [(root_link, None, -1, np.eye(4))]
+    while stack:
+        link_name, j, body, T_body_link = stack.pop()
+        if j is not None:
+            body, T_body_link = attach(link_name, j, body, T_body_link)
         pi = move_params(_link_inertia(links[link_name], fname, strict), T_body_link)
         if body < 0:
             base_params = base_params + pi
         else:
             inertia[body] = inertia[body] + pi
-        for j in children[link_name]:
-            jname = j.get("name")
-            where = f"{fname}: joint '{jname}'"
-            child = j.find("child").get("link")
-            T_body_joint = T_body_link @ _origin(j, where)
-            jtype = j.get("type")
-            if jtype in _FREE:
-                if link_name != root_link:
-                    raise URDFError(
-                        f"{where}: unknown or unsupported joint type '{jtype}' below the root link; jflex models "
-                        "fixed-base trees (a free joint from the root link, a floating base, is welded there)"
-                    )
-                if floating == "refuse":
-                    raise URDFError(
-                        f"{where}: a {jtype} joint from the root link (a floating base) and floating='refuse'; "
-                        "jflex models fixed-base trees: floating='fixed' welds it at its origin"
-                    )
-                if floating is None:
-                    warnings.warn(
-                        f"{where}: {jtype} joint from the root link welded at its origin: jflex models "
-                        "fixed-base trees (pass floating='fixed' to say so, or 'refuse')",
-                        UserWarning,
-                        stacklevel=4,
-                    )
-            if jtype in _FREE or jtype == "fixed" or jname in locked:
-                if jname in locked:
-                    T_motion = np.eye(4)
-                    axis, v = axis_of(j, where), locked[jname]
-                    if jtype == "prismatic":
-                        T_motion[:3, 3] = axis * v
-                    else:
-                        T_motion[:3, :3] = np.asarray(rot_axis_angle(axis, v))
-                    T_body_joint = T_body_joint @ T_motion
-                frame_names.append(child)
-                frame_parents.append(body)
-                frame_T.append(T_body_joint)
-                visit(child, body, T_body_joint)
-                continue
-            axis = axis_of(j, where)
-            lim = j.find("limit")
-            if jtype in ("revolute", "prismatic") and lim is None:
-                raise URDFError(f"{where}: a {jtype} joint needs a <limit lower upper effort velocity>")
-            if jtype == "continuous":
-                lo, hi = -np.inf, np.inf
-            else:
-                lo = _attr_float(lim, "lower", f"{where} <limit>", 0.0)
-                hi = _attr_float(lim, "upper", f"{where} <limit>", 0.0)
-                if lo > hi:
-                    raise URDFError(f"{where}: <limit> lower {lo} > upper {hi}")
-            eff = _attr_float(lim, "effort", f"{where} <limit>", np.inf) if lim is not None else np.inf
-            vel = _attr_float(lim, "velocity", f"{where} <limit>", np.inf) if lim is not None else np.inf
-            idx = len(joint_names)
-            joint_names.append(jname)
-            link_names.append(child)
-            parents.append(body)
-            types.append(_MOVING[jtype])
-            Rs.append(T_body_joint[:3, :3])
-            ps.append(T_body_joint[:3, 3])
-            axes.append(axis)
-            inertia.append(np.zeros(10))
-            lims.append((lo, hi, vel, eff))
-            visit(child, idx, np.eye(4))
-
-    visit(root_link, -1, np.eye(4))
+        # reversed: the first child (in joint-name order) comes off the stack first
+        for jc in reversed(children[link_name]):
+            stack.append((jc.find("child").get("link"), jc, body, T_body_link @ _origin(jc, f"{fname}: joint '{jc.get('name')}'")))
     if not joint_names:
         raise URDFError(
             f"{fname}: no moving joints (revolute, continuous or prismatic)" + (" left after lock/joints" if locked else "")
@@ -431,6 +488,7 @@ def _from_element(root, fname, gravity, lock=None, joints=None, mimic="refuse", 
             frame_R=np.stack([T[:3, :3] for T in frame_T]) if frame_T else None,
             frame_p=np.stack([T[:3, 3] for T in frame_T]) if frame_T else None,
             base_name=root_link,
+            mimic=[(k, *coupled[k]) for k in joint_names if k in coupled],
             check_physical=False,  # each link was checked above, by name (a sum of physical bodies is physical)
         )
     except ParameterError as exc:

@@ -1,10 +1,12 @@
 """URDF loading against Pinocchio: every URDF shipped in example-robot-data, reduced models
 (``pin.buildReducedModel``), mimic joints, floating bases, inertia checks.
 
-The reference for each file is ``pin.buildModelFromUrdf(path)`` (fixed base, mimic joints as
-independent joints). Pinocchio stores a continuous joint as ``(cos, sin)``; jflex as the angle.
-Evaluation is eager (one call per kernel and state): jitting each robot would cost more compile
-time than it saves.
+The reference for each file is ``pin.buildModelFromUrdf(path, mimic=True)`` (fixed base, mimic
+joints as coupled coordinates, jflex's default); a robot with mimic joints is also compared, loaded
+with ``mimic="independent"``, against ``mimic=False``. Pinocchio stores a continuous joint as
+``(cos, sin)``; jflex as the angle. Evaluation is eager (one call per kernel, one state): jitting
+each robot would cost more compile time than it saves. By default a representative subset runs
+(every robot with mimic joints, a continuous joint, a reduced tree); JFLEX_SLOW=1 runs them all.
 """
 
 import pathlib
@@ -22,6 +24,7 @@ from conftest import SLOW
 pytestmark = pytest.mark.skipif(pin is None, reason="needs the test extra 'pin'")
 
 RTOL = 1e-9
+_FREE = ("floating", "planar")
 
 
 def _erd_root():
@@ -38,16 +41,48 @@ URDFS = sorted(str(p.relative_to(ERD)) for p in ERD.rglob("*.urdf")) if ERD is n
 HEAVY_CRBA = {"tiago_description/robots/tiago_dual.urdf"}
 
 
+def _has_mimic(rel):
+    return any(j.find("mimic") is not None and j.get("type") in ("revolute", "continuous", "prismatic")
+               for j in ET.parse(ERD / rel).getroot().findall("joint"))
+
+
+MIMIC_URDFS = [rel for rel in URDFS if _has_mimic(rel)]
+
+
+def _broken_mimic(path):
+    """The first moving joint whose <mimic> names no moving joint of the file, or None."""
+    joints = {j.get("name"): j for j in ET.parse(path).getroot().findall("joint")}
+    moving = ("revolute", "continuous", "prismatic")
+    for name, j in joints.items():
+        m = j.find("mimic")
+        if m is not None and j.get("type") in moving and joints.get(m.get("joint"), j).get("type") not in moving:
+            return name
+        if m is not None and j.get("type") in moving and m.get("joint") not in joints:
+            return name
+    return None
+# besides those: continuous joints (double pendulum, TIAGo's wheels), fixed joints carrying <mimic>
+# (talos_reduced), a plain arm, a lone body
+# (panda_collision and talos_full_v2_box repeat their siblings' trees: with JFLEX_SLOW=1 only)
+SUBSET = set(MIMIC_URDFS) - {"panda_description/urdf/panda_collision.urdf", "talos_data/robots/talos_full_v2_box.urdf"} | {
+    "double_pendulum_description/urdf/double_pendulum_continuous.urdf",
+    "talos_data/robots/talos_reduced.urdf",
+    "ur_description/urdf/ur5_robot.urdf",
+    "hector_description/robots/quadrotor_base.urdf",
+}
+
+
 def close(a, b, rtol=RTOL, what=""):
     a, b = np.asarray(a), np.asarray(b).reshape(np.shape(a))
     np.testing.assert_allclose(a, b, rtol=0, atol=rtol * max(1.0, np.abs(b).max()), err_msg=what)
 
 
-def pin_q(model, theta):
-    """Pinocchio's configuration for joint angles/positions ``theta`` (one per jflex joint)."""
+def pin_q(model, theta, names=None):
+    """Pinocchio's configuration for joint angles/positions ``theta``, one per jflex coordinate
+    (``names``: the jflex coordinates, by default Pinocchio's joints in order)."""
+    names = list(model.names[1:]) if names is None else names
     q = np.zeros(model.nq)
-    for i, th in enumerate(theta):
-        jm = model.joints[i + 1]
+    for name, th in zip(names, theta, strict=True):
+        jm = model.joints[model.getJointId(name)]
         if jm.nq == 2:  # continuous (unbounded revolute): (cos, sin)
             q[jm.idx_q : jm.idx_q + 2] = np.cos(th), np.sin(th)
         else:
@@ -55,61 +90,138 @@ def pin_q(model, theta):
     return q
 
 
+def _coordinates_match(robot, model):
+    """jflex's coordinates are Pinocchio's velocity coordinates, in the same order."""
+    assert robot.joint_names == tuple(model.names[1:])
+    assert robot.nq == model.nv
+    idx_v = [model.joints[model.getJointId(k)].idx_v for k in robot.coordinate_names]
+    assert idx_v == list(range(model.nv))
+
+
 def _sym(M):
     return np.triu(M) + np.triu(M, 1).T
 
 
-def compare(robot, model, rng, crba=True, states=2):
-    """rnea, crba and forward dynamics (ABA) against Pinocchio at random states."""
-    assert robot.joint_names == tuple(model.names[1:])
-    data = model.createData()
+def coupling(path, names):
+    """``(G, b)`` with Pinocchio's joint values ``G q + b`` for jflex's coordinates ``q``, read from
+    the URDF's <mimic> tags (chains composed), for ``names`` the joints of the tree: the reference
+    for the files whose mimic joints Pinocchio cannot couple (a leader met after its follower)."""
+    spec = {}
+    for j in ET.parse(path).getroot().findall("joint"):
+        m = j.find("mimic")
+        if m is not None and j.get("name") in names:
+            spec[j.get("name")] = (m.get("joint"), float(m.get("multiplier", 1)), float(m.get("offset", 0)))
+    coords = [k for k in names if k not in spec]
+    G, b = np.zeros((len(names), len(coords))), np.zeros(len(names))
+    for i, k in enumerate(names):
+        a, off = 1.0, 0.0
+        while k in spec:
+            k, ak, bk = spec[k]
+            a, off = a * ak, a * bk + off
+        G[i, coords.index(k)], b[i] = a, off
+    return G, b, coords
+
+
+def compare(robot, model, rng, crba=True, states=1, kinematics=True, G=None, b=None):
+    """rnea, crba, forward dynamics, forward kinematics and a Jacobian against Pinocchio at random
+    states. With mimic joints Pinocchio has no ABA: forward dynamics is checked to return the
+    accelerations that Pinocchio's rnea turned into torques. ``G, b`` (see :func:`coupling`): the
+    model's joints are independent and jflex's coordinates map onto them as ``G q + b``."""
     n = robot.nq
+    if G is None:
+        _coordinates_match(robot, model)
+        G, b, names = np.eye(n), np.zeros(n), robot.coordinate_names
+    else:
+        assert robot.joint_names == tuple(model.names[1:]) and model.nv == robot.n_joints
+        names = robot.joint_names
+    data = model.createData()
+    mimic = robot.nq < robot.n_joints
     for _ in range(states):
         th = rng.uniform(-1.0, 1.0, n)
         v, a = rng.normal(size=n), rng.normal(size=n)
-        q = pin_q(model, th)
-        tau = pin.rnea(model, data, q, v, a)
+        q = pin_q(model, G @ th + b, names)
+        tau = G.T @ pin.rnea(model, data, q, G @ v, G @ a)
         close(jflex.rnea(robot, th, v, a), tau, what="rnea")
-        M = _sym(pin.crba(model, data, q))
+        M = G.T @ _sym(pin.crba(model, data, q)) @ G
         if crba:
             close(jflex.crba(robot, th), M, what="crba")
+        if kinematics:
+            pin.forwardKinematics(model, data, q)
+            T = np.asarray(jflex.forward_kinematics(robot, th))
+            close(T, np.stack([data.oMi[i].homogeneous for i in range(1, model.njoints)]), what="forward kinematics")
+            # the deepest joint's Jacobian, or a coupled one's: the most columns, or the coupling
+            depth = [len(model.supports[i]) for i in range(1, model.njoints)]
+            k = int(np.argmax(depth)) + 1
+            if mimic:
+                k = 1 + next(i for i, m in enumerate(robot.mimic) if m >= 0)
+            pin.computeJointJacobians(model, data, q)
+            J = pin.getJointJacobian(model, data, k, pin.LOCAL_WORLD_ALIGNED)
+            close(jflex.jacobian(robot, th, model.names[k]), J @ G if J.shape[1] == G.shape[0] else J,
+                  what=f"jacobian of {model.names[k]}")
         if np.linalg.eigvalsh(M)[0] <= 1e-12 * np.abs(M).max():
             # a moving joint carrying no inertia (romeo's fingers, romeo_laas_small's grippers): M is singular
             continue
         qdd = np.asarray(jflex.forward_dynamics(robot, th, v, tau))
-        qdd_pin = pin.aba(model, data, q, v, tau)
+        qdd_pin = a if mimic else pin.aba(model, data, q, v, tau)
         # Accelerations are as exact as M is well conditioned (iCub: cond 4e7, Pinocchio's own aba
         # misses a by 2e-9); compared in torque space, M (qdd - qdd_pin), the check is uniform.
-        close(M @ qdd, M @ qdd_pin, what="aba (torque space)")
-        close(qdd, qdd_pin, rtol=RTOL * max(1.0, 1e-7 * np.linalg.cond(M)), what="aba")
+        close(M @ qdd, M @ qdd_pin, what="forward dynamics (torque space)")
+        close(qdd, qdd_pin, rtol=RTOL * max(1.0, 1e-7 * np.linalg.cond(M)), what="forward dynamics")
 
 
-def _load_pin(rel):
+def _load_pin(rel, mimic=False):
     try:
-        return pin.buildModelFromUrdf(str(ERD / rel))
+        return pin.buildModelFromUrdf(str(ERD / rel), mimic=mimic)
     except (RuntimeError, ValueError) as exc:  # ur3.urdf: "No name given for the robot"
         pytest.skip(f"Pinocchio does not load {rel}: {str(exc).splitlines()[0][:80]}")
 
 
-@pytest.mark.parametrize("rel", URDFS)
+@pytest.mark.slow
+@pytest.mark.parametrize("rel", URDFS if SLOW else sorted(SUBSET & set(URDFS)))
 def test_example_robot_data_urdf_matches_pinocchio(rel):
-    model = _load_pin(rel)
     path = ERD / rel
+    mimic = rel in MIMIC_URDFS
+    model = _load_pin(rel)
     if model.nv == 0:  # a lone body (quadrotor, iris_simple): no joint to model
         with pytest.raises(jflex.URDFError, match="no moving joints"):
             jflex.load_urdf(path)
         return
+    broken = _broken_mimic(path)
+    if broken:  # a <mimic> naming a joint the file lacks (alex_psyonic_hands): named, not coupled
+        with pytest.raises(jflex.URDFError, match=f"joint '{broken}'.*<mimic joint=.*mimic='independent'"):
+            jflex.load_urdf(path)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        robot = jflex.load_urdf(path, mimic="independent")
+        robot = jflex.load_urdf(path, mimic="independent" if broken else "coupled")
     nonphysical = [str(w.message) for w in caught if "non-physical inertia" in str(w.message)]
     if nonphysical:
         with pytest.raises(jflex.URDFError, match="non-physical inertia"):
-            jflex.load_urdf(path, mimic="independent", strict=True)
-    if any(j.find("mimic") is not None and j.get("type") != "fixed" for j in ET.parse(path).getroot().iter("joint")):
-        with pytest.raises(jflex.URDFError, match="mimic"):
-            jflex.load_urdf(path)
-    compare(robot, model, np.random.default_rng(0), crba=SLOW or rel not in HEAVY_CRBA)
+            jflex.load_urdf(path, mimic=robot.mimic and "coupled" or "independent", strict=True)
+    big = rel in HEAVY_CRBA and not SLOW
+    rng = np.random.default_rng(0)
+    if not mimic or broken:
+        compare(robot, model, rng, crba=not big, kinematics=not big)
+        return
+    assert robot.nq < robot.n_joints
+    with pytest.raises(jflex.URDFError, match="mimic"):
+        jflex.load_urdf(path, mimic="refuse")
+    try:
+        coupled = pin.buildModelFromUrdf(str(path), mimic=True)
+    except (RuntimeError, ValueError):
+        coupled = None  # "The parent joint of the mimic joint is not in the kinematic tree" (Pinocchio 3.x, 4.x)
+    if coupled is not None:
+        compare(robot, coupled, rng)
+    else:
+        G, b, coords = coupling(path, robot.joint_names)
+        assert robot.coordinate_names == tuple(coords)
+        compare(robot, model, rng, G=G, b=b)
+    if SLOW or rel == "panda_description/urdf/panda.urdf":
+        # as independent joints, against Pinocchio's default (mimic=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            independent = jflex.load_urdf(path, mimic="independent")
+        assert independent.joint_names == robot.joint_names and independent.nq == robot.n_joints
+        compare(independent, model, np.random.default_rng(1), kinematics=False)
 
 
 # ---- reduced models ---------------------------------------------------------------------------
@@ -192,21 +304,43 @@ def test_reduction_errors_name_the_joint():
 # ---- mimic joints -----------------------------------------------------------------------------
 
 
-def test_mimic_joint_refused_or_locked_with_its_leader():
+def test_panda_loads_as_it_ships_with_coupled_fingers():
     if ERD is None:
         pytest.skip("example-robot-data not installed")
     path = ERD / "panda_description/urdf/panda.urdf"
+    robot = jflex.load_urdf(path)
+    arm = tuple(f"panda_joint{i}" for i in range(1, 8))
+    assert robot.coordinate_names == arm + ("panda_finger_joint1",)
+    assert robot.joint_names == robot.coordinate_names + ("panda_finger_joint2",) and robot.nq == 8
     with pytest.raises(jflex.URDFError, match=r"panda.urdf: joint 'panda_finger_joint2' mimics joint 'panda_finger_joint1'.*lock="):
-        jflex.load_urdf(path)
+        jflex.load_urdf(path, mimic="refuse")
+    with pytest.raises(jflex.URDFError, match=r"mimic must be one of \['coupled', 'independent', 'refuse'\]"):
+        jflex.load_urdf(path, mimic="yes")
     # locking the leader locks the follower at multiplier * value + offset (1 and 0 here)
-    robot = jflex.load_urdf(path, lock={"panda_finger_joint1": 0.03})
+    locked = jflex.load_urdf(path, lock={"panda_finger_joint1": 0.03})
     model = _reduced_pin(pin.buildModelFromUrdf(str(path)), {"panda_finger_joint1": 0.03, "panda_finger_joint2": 0.03})
-    compare(robot, model, np.random.default_rng(3))
+    compare(locked, model, np.random.default_rng(3))
     # a follower locked while its leader moves breaks the coupling: refused
-    with pytest.raises(jflex.URDFError, match="panda_finger_joint2' mimics"):
+    with pytest.raises(jflex.URDFError, match="panda_finger_joint2' mimics.*locked while its leader moves"):
         jflex.load_urdf(path, lock={"panda_finger_joint2": 0.01})
+    # joints= names coordinates: a kept leader keeps its follower coupled to it
+    hand = jflex.load_urdf(path, joints=["panda_joint7", "panda_finger_joint1"])
+    assert hand.coordinate_names == ("panda_joint7", "panda_finger_joint1") and hand.n_joints == 3
+    full = pin.buildModelFromUrdf(str(path), mimic=True)
+    reduced = pin.buildReducedModel(full, [full.getJointId(f"panda_joint{i}") for i in range(1, 7)], pin.neutral(full))
+    compare(hand, reduced, np.random.default_rng(4))
+    with pytest.raises(jflex.URDFError, match="joints names 'panda_finger_joint2', which mimics joint 'panda_finger_joint1'"):
+        jflex.load_urdf(path, joints=["panda_joint7", "panda_finger_joint2"])
     # load_robot("panda") is the 7-joint arm, fingers closed
-    assert jflex.load_robot("panda").joint_names == tuple(f"panda_joint{i}" for i in range(1, 8))
+    assert jflex.load_robot("panda").joint_names == arm
+
+
+def test_duplicate_names_in_joints_are_refused():
+    if ERD is None:
+        pytest.skip("example-robot-data not installed")
+    path = ERD / "ur_description/urdf/ur5_robot.urdf"
+    with pytest.raises(jflex.URDFError, match="joints names 'elbow_joint' twice"):
+        jflex.load_urdf(path, joints=["elbow_joint", "shoulder_lift_joint", "elbow_joint"])
 
 
 MIMIC = """<robot name="m">
@@ -221,7 +355,7 @@ MIMIC = """<robot name="m">
 
 
 def test_mimic_of_a_missing_joint_is_named():
-    with pytest.raises(jflex.URDFError, match="joint 'j2'.*<mimic joint='j9'>"):
+    with pytest.raises(jflex.URDFError, match="joint 'j2'.*<mimic joint='j9'>.*mimic='independent'"):
         jflex.from_urdf_string(MIMIC.format(leader="j9"))
     r = jflex.from_urdf_string(MIMIC.format(leader="j9"), mimic="independent")
     assert r.joint_names == ("j0", "j1", "j2")
