@@ -44,7 +44,7 @@ def test_closed_loop_command_is_the_plants_inverse_dynamics():
     # friction and the planted effect; the motion is an integral (rates = d/dt angles) and it is
     # not the reference (the controller tracks it with an error)
     rng, true, home, cad, tr, fric, scale, qdstd = _arm(1)
-    eff = [RL._effect(rng, true, "viscous_friction", 1, scale, qdstd)]
+    eff = [RL._effect(rng, true, "viscous_friction", 1, scale, qdstd, fric)]
     t = np.arange(600) / 2000.0
     q, qd, qdd, u, r = RL.closed_loop(true, cad, tr, home, t, fric, eff)
     tau = rnea_batch(true, q, qd, qdd) + RL.friction(*fric, qd) + RL.planted_torque(eff, q, qd, t)
@@ -115,6 +115,10 @@ def test_the_dead_channel_is_dead(tmp_path, trait):
     folder, truth = RL.make_reallog_case(tmp_path / trait, trait, seed=5)
     (dead,) = truth["dead_channels"]
     assert dead["joint"] == "joint3"
+    # the planted viscous friction at the shoulder is not in the nominal model
+    import yaml
+    nominal = yaml.safe_load((folder / "case.yaml").read_text())["nominal_effects"]
+    assert {"effect": "viscous_friction", "joint": ["joint1", "joint3"]} in nominal
     for rec in ("traj0", "traj1", "traj2"):
         with np.load(folder / f"{rec}.npz") as z:
             col = z["tau"][:, 2]
@@ -185,3 +189,27 @@ def test_every_case_loads(tmp_path, trait):
     assert {d.split for d in case.datasets} == {"train", "validation"}
     assert "truth" not in (folder / "case.yaml").read_text()
     assert json.loads((folder / "truth.json").read_text()) == truth
+
+
+def _extended_format() -> bool:
+    from jflex.gap import _schema
+
+    f = _schema.Dataset.model_fields
+    return "coupling" in f and "offset" in f
+
+
+@pytest.mark.parametrize("trait", ["currents", "coupled_wrist"])
+def test_extended_currents_case_loads_as_the_transmission_maps(tmp_path, trait):
+    # case.yaml states offsets, data-sheet constants and the coupling: the loaded torques are
+    # tau = K^T k_sheet (i - i0) as written out above, from the CSV's raw currents
+    if not _extended_format():
+        pytest.xfail("the case format has no current offsets / coupling matrix yet (datasets[].offset, .coupling)")
+    folder, truth = RL.make_reallog_case(tmp_path / trait, trait, seed=12, fmt="extended")
+    tr = truth["transmission"]
+    case = jflex.gap.load_case(folder)
+    for d in case.datasets:
+        header, a = _read_csv(folder / f"{d.name}.csv")
+        i = a[:, [header.index(f"motor{m + 1}_current") for m in range(3)]]
+        want = RL.torque_from_current(np.asarray(tr["K"]), np.asarray(tr["torque_constant_datasheet"]), i,
+                                      np.asarray(tr["current_offset_a"]))
+        np.testing.assert_allclose(d.arrays["tau"], want, rtol=1e-9, atol=1e-9)

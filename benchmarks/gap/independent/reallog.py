@@ -54,6 +54,10 @@ DEAD_FRACTION = 0.85  # share of exact zeros on a dead channel
 STUCK_VALUE = 0.013   # [N m] a stuck channel's constant reading
 DRIFT = 0.30          # viscous friction grows by this fraction over the session
 ENCODER_STEP = 2 * np.pi / 2**19
+# "current": case.yaml as docs/case_format.md had it when this family was written (one CSV per
+# record; scale per column only); "extended": the fields for real robots (a list of CSV files
+# merged on time, current offsets, a coupling matrix); the currents and jitter cases read it
+CASE_FORMAT = "current"
 
 
 # --- the physics ----------------------------------------------------------------------------------
@@ -223,10 +227,15 @@ def _write_csv(path, header, cols):
             w.writerow([f"{v:.10g}" for v in row])
 
 
-def _case_yaml(folder, datasets, tool, notes=None):
-    cfg = dict(robot="robot.urdf", tool_frame=tool,
-               nominal_effects=[dict(effect="viscous_friction", joint="all"), dict(effect="coulomb_friction", joint="all")],
-               datasets=datasets)
+def _case_yaml(folder, datasets, tool, true, fric, notes=None):
+    """case.yaml: the nominal friction laws at the joints whose true robot has them (a planted
+    friction replaces the nominal law at its joint, so that joint's law is not nominal)."""
+    nominal = []
+    for law, vals in (("viscous_friction", fric[0]), ("coulomb_friction", fric[1])):
+        js = [true.names[k + 1] for k in range(true.nq) if vals[k] > 0]
+        if js:
+            nominal.append(dict(effect=law, joint="all" if len(js) == true.nq else js))
+    cfg = dict(robot="robot.urdf", tool_frame=tool, nominal_effects=nominal, datasets=datasets)
     if notes:
         cfg["notes"] = notes
     (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
@@ -243,12 +252,16 @@ def _noise(rng, tau, pct, pole=0.7, ref=None):
     return S.ar1_noise(rng, tau.shape, pole, std), std
 
 
-def _effect(rng, true, name, j, scale, qdstd, r=None):
+def _effect(rng, true, name, j, scale, qdstd, fric, r=None):
+    """A planted effect of 10-15 % of joint ``j``'s torque std; a planted friction law replaces
+    the every-joint one at ``j`` (``fric = (Fv, Fc)`` is zeroed there, in place)."""
     r = rng.uniform(0.10, 0.15) if r is None else r
     if name == "viscous_friction":
         p = {"Fv": float(r * scale[j] / qdstd[j])}
+        fric[0][j] = 0.0
     elif name == "coulomb_friction":
         p = {"Fc": float(r * scale[j])}
+        fric[1][j] = 0.0
     elif name == "cogging":
         p = {"A": float(r * scale[j]), "periods": float(rng.uniform(15, 30)), "phase": float(rng.uniform(0, 2 * np.pi))}
     else:
@@ -301,11 +314,11 @@ def case_closed_loop(folder, robot="arm3", seed=0, small=True, cogging=False):
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     j = _pick_joint(rng, true.nq)
-    eff = [_effect(rng, true, "cogging" if cogging else "viscous_friction", j, scale, qdstd)]
+    eff = [_effect(rng, true, "cogging" if cogging else "viscous_friction", j, scale, qdstd, (Fv, Fc))]
     recs, std = _records(rng, true, trajs, (Fv, Fc), eff, T, fs, 1.0, cad=cad, home=home)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    _case_yaml(folder, _npz_datasets(folder, recs), tool)
+    _case_yaml(folder, _npz_datasets(folder, recs), tool, true, (Fv, Fc))
     trait = "cogging" if cogging else "closed_loop"
     truth = _truth(true, robot, trait, "out_of_library" if cogging else "single", eff,
                    "unexplained" if cogging else "explained", std, cad_error=caderr,
@@ -318,10 +331,13 @@ def case_cogging(folder, robot="arm3", seed=0, small=True):
     return case_closed_loop(folder, robot, seed, small, cogging=True)
 
 
-def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forget_scale=False):
+def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forget_scale=False, fmt=None):
     """Motor currents in a CSV per record; case.yaml's scale is data-sheet constant x gear ratio
     (the constants 2-5 % off the true ones). Per-joint current offsets ``i0``. ``coupled``: the last
-    two joints share a coupling (``tau = K^T k (i - i0)``). ``forget_scale``: no scale at all."""
+    two joints share a coupling (``tau = K^T k (i - i0)``). ``forget_scale``: no scale at all.
+    ``fmt`` (default ``CASE_FORMAT``): ``extended`` states the offsets and the coupling in
+    case.yaml; ``current`` leaves them to ``transmission.json`` (the diagonal scale only)."""
+    fmt = fmt or CASE_FORMAT
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
     n = true.nq
@@ -334,7 +350,8 @@ def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forge
     i0 = rng.uniform(-0.05, 0.05, n)
     cpl = (n - 2, n - 1) if coupled else None
     K, k = current_map(n, gear, k_true, cpl, c=float(rng.uniform(0.3, 1.0)) if coupled else 0.0)
-    eff = [] if forget_scale else [_effect(rng, true, "coulomb_friction", _pick_joint(rng, n, cpl or ()), scale, qdstd)]
+    eff = [] if forget_scale else [_effect(rng, true, "coulomb_friction", _pick_joint(rng, n, cpl or ()), scale, qdstd,
+                                           (Fv, Fc))]
     recs, std = _records(rng, true, trajs, (Fv, Fc), eff, T, fs, 1.0)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -347,9 +364,16 @@ def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forge
         d = dict(kind="torque", file=f"{name}.csv", split=split,
                  columns=dict(time="time", position={m: f"{m}_pos" for m in names},
                               torque={m: f"motor{r + 1}_current" for r, m in enumerate(names)}))
+        col = [f"motor{r + 1}_current" for r in range(n)]
         if not forget_scale:
-            # what a user writes from the data sheets (the format's scale is diagonal, no offset)
-            d["scale"] = {f"motor{r + 1}_current": float(k_sheet[r] * gear[r]) for r in range(n)}
+            # what a user writes from the data sheets: constant x gear, or at a coupled motor the
+            # constant alone (the coupling matrix holds its gear)
+            d["scale"] = {col[r]: float(k_sheet[r] * (1.0 if fmt == "extended" and cpl and r in cpl else gear[r]))
+                          for r in range(n)}
+        if fmt == "extended":
+            d["offset"] = {col[r]: float(i0[r]) for r in range(n)}
+            if cpl:
+                d["coupling"] = dict(joints=[names[m] for m in cpl], matrix=K[np.ix_(cpl, cpl)].tolist())
         ds.append(d)
     trans = dict(K=K.tolist(), torque_constant_true=k_true.tolist(), torque_constant_datasheet=k_sheet.tolist(),
                  gear=gear.tolist(), current_offset_a=i0.tolist(), coupled_joints=[names[m] for m in cpl] if cpl else [])
@@ -358,29 +382,31 @@ def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forge
     (folder / "transmission.json").write_text(json.dumps(
         dict(K=K.tolist(), torque_constant=k_sheet.tolist(), gear=gear.tolist(), current_offset_a=i0.tolist(),
              coupled_joints=trans["coupled_joints"]), indent=1))
-    notes = ("motor currents; the current offsets i0" + (" and the wrist coupling K" if coupled else "")
-             + " are in transmission.json (tau = K^T k (i - i0))")
-    _case_yaml(folder, ds, tool, notes)
+    gaps = [] if fmt == "extended" else ["current offsets"] + (["coupled transmission"] if coupled else [])
+    notes = ("motor currents; " + " and ".join(gaps) + " in transmission.json (tau = K^T k (i - i0))") if gaps else None
+    _case_yaml(folder, ds, tool, true, (Fv, Fc), notes)
     trait = "forgotten_scale" if forget_scale else ("coupled_wrist" if coupled else "currents")
     truth = _truth(true, robot, trait, "forgotten_scale" if forget_scale else "single", eff,
                    "not_explained" if forget_scale else "explained", std, cad_error=caderr, transmission=trans,
-                   format_gaps=["current offsets"] + (["coupled transmission"] if coupled else []),
+                   case_format=fmt, format_gaps=gaps,
                    realism=dict(fs_hz=fs, friction_Fv=Fv.tolist(), friction_Fc=Fc.tolist(), torque_std=scale.tolist()))
     return _finish(folder, cad, tool, robot, truth)
 
 
-def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False):
+def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False, fmt=None):
     """CSV logs whose stamps jitter by 20 % with dropped samples and repeated rows (``twin``: the
-    same case sampled uniformly). Planted: viscous friction at one joint. The raw topics (positions,
-    velocities, efforts, each with its own stamps as a ROS-derived export) are written too, under
-    ``raw/``."""
+    same case sampled uniformly). Planted: viscous friction at one joint. The topics (positions,
+    velocities, efforts: one CSV each, as a ROS-derived export) are written under ``raw/``; with
+    ``fmt`` ``extended`` case.yaml names the position and effort files of each record (merged on
+    time), else one merged CSV per record."""
+    fmt = fmt or CASE_FORMAT
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
     n = true.nq
     T, fs = (4.0 if small else 8.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
-    eff = [_effect(rng, true, "viscous_friction", _pick_joint(rng, n), scale, qdstd)]
+    eff = [_effect(rng, true, "viscous_friction", _pick_joint(rng, n), scale, qdstd, (Fv, Fc))]
     srng = np.random.default_rng(seed + 10_000)  # the stamps' draws apart: the twin's physics is the same
     nrng = np.random.default_rng(seed + 20_000)
     folder = pathlib.Path(folder)
@@ -405,12 +431,13 @@ def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False):
         name = f"traj{i}"
         hdr = ["time"] + [f"{m}_pos" for m in names] + [f"{m}_effort" for m in names]
         _write_csv(folder / f"{name}.csv", hdr, [t, *qm.T, *tau.T])
-        for topic, arr in (("position", qm), ("velocity", qdm), ("effort", tau)):
-            _write_csv(folder / "raw" / f"{name}_{topic}.csv", ["time"] + names, [t, *arr.T])
-        ds.append(dict(kind="torque", file=f"{name}.csv", split="train" if i < 2 else "validation",
+        for topic, suf, arr in (("position", "pos", qm), ("velocity", "vel", qdm), ("effort", "effort", tau)):
+            _write_csv(folder / "raw" / f"{name}_{topic}.csv", ["time"] + [f"{m}_{suf}" for m in names], [t, *arr.T])
+        files = [f"raw/{name}_position.csv", f"raw/{name}_effort.csv"] if fmt == "extended" else f"{name}.csv"
+        ds.append(dict(kind="torque", file=files, split="train" if i < 2 else "validation",
                        columns=dict(time="time", position={m: f"{m}_pos" for m in names},
                                     torque={m: f"{m}_effort" for m in names})))
-    _case_yaml(folder, ds, tool)
+    _case_yaml(folder, ds, tool, true, (Fv, Fc))
     truth = _truth(true, robot, "jitter_twin" if twin else "jitter", "single", eff, "explained", 0.01 * scale,
                    cad_error=caderr, stamps=stats, nominal_rate_hz=fs,
                    realism=dict(fs_hz=fs, jitter=0.0 if twin else JITTER, friction_Fv=Fv.tolist(), friction_Fc=Fc.tolist(),
@@ -427,7 +454,7 @@ def case_dead(folder, robot="arm3", seed=0, small=True, stuck=False):
     T, fs = (4.0 if small else 8.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
-    eff = [_effect(rng, true, "viscous_friction", 1, scale, qdstd)]
+    eff = [_effect(rng, true, "viscous_friction", 1, scale, qdstd, (Fv, Fc))]
     recs, std = _records(rng, true, trajs, (Fv, Fc), eff, T, fs, 1.0)
     dead = n - 1
     for _, _, a in recs:
@@ -437,7 +464,7 @@ def case_dead(folder, robot="arm3", seed=0, small=True, stuck=False):
             a["tau"][rng.random(a["tau"].shape[0]) < DEAD_FRACTION, dead] = 0.0
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    _case_yaml(folder, _npz_datasets(folder, recs), tool)
+    _case_yaml(folder, _npz_datasets(folder, recs), tool, true, (Fv, Fc))
     truth = _truth(true, robot, "dead_stuck" if stuck else "dead_zero", "single", eff, "explained", std, cad_error=caderr,
                    realism=dict(fs_hz=fs, friction_Fv=Fv.tolist(), friction_Fc=Fc.tolist(), torque_std=scale.tolist()))
     truth["dead_channels"] = [dict(joint=true.names[dead + 1], kind="stuck" if stuck else "zeros",
@@ -460,7 +487,7 @@ def case_drifting_friction(folder, robot="arm3", seed=0, small=True):
     recs, std = _records(rng, true, trajs, (Fv, Fc), eff, T, fs, 0.5)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    _case_yaml(folder, _npz_datasets(folder, recs), tool)
+    _case_yaml(folder, _npz_datasets(folder, recs), tool, true, (Fv, Fc))
     truth = _truth(true, robot, "drifting_friction", "drift", eff, "not_within_noise", std, cad_error=caderr,
                    realism=dict(fs_hz=fs, friction_Fv=Fv.tolist(), friction_Fc=Fc.tolist(), torque_std=scale.tolist()))
     return _finish(folder, cad, tool, robot, truth)
@@ -473,7 +500,7 @@ def case_multirate(folder, robot="arm3", seed=0, small=True):
     T = 4.0 if small else 8.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
-    eff = [_effect(rng, true, "coulomb_friction", _pick_joint(rng, true.nq), scale, qdstd)]
+    eff = [_effect(rng, true, "coulomb_friction", _pick_joint(rng, true.nq), scale, qdstd, (Fv, Fc))]
     recs = []
     for i, (tr, fs) in enumerate(zip(trajs, (250.0, 250.0, 1000.0))):
         r, std = _records(rng, true, [tr], (Fv, Fc), eff, T, fs, 1.0, ref=scale)
@@ -481,7 +508,7 @@ def case_multirate(folder, robot="arm3", seed=0, small=True):
         recs.append((f"traj{i}_{int(fs)}hz", "train" if i < 2 else "validation", a))
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    _case_yaml(folder, _npz_datasets(folder, recs), tool)
+    _case_yaml(folder, _npz_datasets(folder, recs), tool, true, (Fv, Fc))
     truth = _truth(true, robot, "multirate", "single", eff, "explained", std, cad_error=caderr,
                    realism=dict(fs_hz=[250.0, 250.0, 1000.0], friction_Fv=Fv.tolist(), friction_Fc=Fc.tolist(),
                                 torque_std=scale.tolist()))
@@ -506,7 +533,7 @@ def case_periodic(folder, robot="arm3", seed=0, small=True):
                      dict(t=t, q=S.quantise(q, ENCODER_STEP), tau=tau + rng.normal(size=tau.shape) * std[None])))
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    _case_yaml(folder, _npz_datasets(folder, recs), tool)
+    _case_yaml(folder, _npz_datasets(folder, recs), tool, true, (Fv, Fc))
     truth = _truth(true, robot, "periodic", "null", [], "within_noise", std, cad_error=caderr,
                    period_s=P, periods=periods, samples_per_period=int(round(P * fs)),
                    noise_pct_of_torque_std=(100 * std / scale).tolist(),
@@ -527,32 +554,36 @@ def case_null_cad_ar1(folder, robot="arm3", seed=0, small=True):
     recs, std = _records(rng, true, trajs, (Fv, Fc), [], T, fs, 2.0, pole=pole)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    _case_yaml(folder, _npz_datasets(folder, recs), tool)
+    _case_yaml(folder, _npz_datasets(folder, recs), tool, true, (Fv, Fc))
     truth = _truth(true, robot, "null_cad_ar1", "null", [], "within_noise", std, cad_error=caderr,
                    realism=dict(fs_hz=fs, noise_pct=2.0, noise_ar1_pole=pole, friction_Fv=Fv.tolist(),
                                 friction_Fc=Fc.tolist(), torque_std=scale.tolist()))
     return _finish(folder, cad, tool, robot, truth)
 
 
-_MAKERS = {
-    "closed_loop": case_closed_loop, "cogging": case_cogging,
-    "currents": case_currents,
-    "coupled_wrist": lambda f, r, s, sm: case_currents(f, r, s, sm, coupled=True),
-    "forgotten_scale": lambda f, r, s, sm: case_currents(f, r, s, sm, forget_scale=True),
-    "jitter": case_jitter, "jitter_twin": lambda f, r, s, sm: case_jitter(f, r, s, sm, twin=True),
-    "dead_zero": case_dead, "dead_stuck": lambda f, r, s, sm: case_dead(f, r, s, sm, stuck=True),
-    "drifting_friction": case_drifting_friction, "multirate": case_multirate, "periodic": case_periodic,
-    "null_cad_ar1": case_null_cad_ar1,
+_MAKERS = {  # trait -> (function, its keyword arguments); the functions that write CSV take the format
+    "closed_loop": (case_closed_loop, {}), "cogging": (case_cogging, {}),
+    "currents": (case_currents, {"fmt": None}), "coupled_wrist": (case_currents, {"coupled": True, "fmt": None}),
+    "forgotten_scale": (case_currents, {"forget_scale": True, "fmt": None}),
+    "jitter": (case_jitter, {"fmt": None}), "jitter_twin": (case_jitter, {"twin": True, "fmt": None}),
+    "dead_zero": (case_dead, {}), "dead_stuck": (case_dead, {"stuck": True}),
+    "drifting_friction": (case_drifting_friction, {}), "multirate": (case_multirate, {}), "periodic": (case_periodic, {}),
+    "null_cad_ar1": (case_null_cad_ar1, {}),
 }
 
 
-def make_reallog_case(folder, trait, seed=0, small=True, robot=None) -> tuple[pathlib.Path, dict]:
+def make_reallog_case(folder, trait, seed=0, small=True, robot=None, fmt=None) -> tuple[pathlib.Path, dict]:
     """Write the case folder of one trait (see the module's docstring); ``robot`` arm3 | ur5 |
-    panda (default: the plan's choice, arm3 at the small size). Returns ``(folder, truth)``."""
+    panda (default: the plan's choice, arm3 at the small size); ``fmt`` the case format of the
+    CSV cases, ``current`` or ``extended`` (default ``CASE_FORMAT``). Returns ``(folder, truth)``."""
     if trait not in _MAKERS:
         raise ValueError(f"trait: expected one of {TRAITS}, got {trait!r}")
+    if fmt not in (None, "current", "extended"):
+        raise ValueError(f"fmt: expected 'current' or 'extended', got {fmt!r}")
     robot = robot or _robot_for(trait, "small" if small else "full")
-    return _MAKERS[trait](folder, robot, seed, small)
+    fn, kw = _MAKERS[trait]
+    kw = {k: (fmt if k == "fmt" else v) for k, v in kw.items()}
+    return fn(folder, robot, seed, small, **kw)
 
 
 def _robot_for(trait, size):
