@@ -1,11 +1,13 @@
 """Content hashes that identify a computation across processes: arrays by their bytes, pytrees by
-their leaves and structure, functions by qualified name, bytecode and the values they reach
+their leaves and structure (at any depth), functions by qualified name, bytecode and the values they reach
 (closure cells, defaults, ``functools.partial`` arguments, module globals that hold arrays or
-pytrees). What a function reaches through other routes (attributes of objects, files) is not
-seen; ``sweep(key=...)`` covers that."""
+pytrees), and the fields of dataclasses and ``SimpleNamespace`` objects. What a function
+reaches through other routes (attributes of other objects, files) is not seen;
+``sweep(key=...)`` covers that."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import re
@@ -15,7 +17,10 @@ import jax
 import numpy as np
 
 _ADDR = re.compile(r" at 0x[0-9a-fA-F]+")
-_MAX_DEPTH = 4
+# functions reached from functions (through closures and globals) are followed this many hops:
+# beyond, a helper's helper's code is named, not read. Data (containers, pytrees, arrays) is
+# followed to any depth, so a robot held in dicts of lists of tuples is always seen.
+_MAX_FUNCTION_HOPS = 4
 
 
 def _array_bytes(h, a) -> None:
@@ -35,8 +40,10 @@ def _code(h, code: types.CodeType) -> None:
 
 
 def _update(h, obj, depth: int, seen: set) -> None:
-    if depth > _MAX_DEPTH or id(obj) in seen:
-        h.update(b"<deep>")
+    """``depth`` counts function hops only (see ``_MAX_FUNCTION_HOPS``); ``seen`` holds the ids of
+    the containers and functions on the path here, so a cycle is named, not followed."""
+    if id(obj) in seen:
+        h.update(b"<cycle>")
         return
     if isinstance(obj, (types.ModuleType, type)):
         h.update(f"<{getattr(obj, '__name__', '?')}>".encode())
@@ -59,6 +66,8 @@ def _update(h, obj, depth: int, seen: set) -> None:
         return
     if isinstance(obj, types.FunctionType):
         h.update(f"fn {obj.__module__}.{obj.__qualname__}".encode())
+        if depth > _MAX_FUNCTION_HOPS:
+            return
         _code(h, obj.__code__)
         for part in (obj.__defaults__, obj.__kwdefaults__):
             _update(h, part, depth + 1, seen)
@@ -79,16 +88,20 @@ def _update(h, obj, depth: int, seen: set) -> None:
     if isinstance(obj, dict):
         for k in sorted(obj, key=repr):
             h.update(repr(k).encode())
-            _update(h, obj[k], depth + 1, seen)
+            _update(h, obj[k], depth, seen)
         return
     leaves, treedef = jax.tree_util.tree_flatten(obj)
     if len(leaves) == 1 and leaves[0] is obj:  # not a pytree: its type and printed form
         h.update(f"{type(obj).__module__}.{type(obj).__qualname__}".encode())
         h.update(_ADDR.sub("", repr(obj)).encode())
+        if dataclasses.is_dataclass(obj) or isinstance(obj, types.SimpleNamespace):
+            # plain data holders: their fields, which a repr may abbreviate (arrays) or leave out
+            _update(h, dict(vars(obj)) if hasattr(obj, "__dict__") else
+                    {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}, depth, seen)
         return
     h.update(_ADDR.sub("", str(treedef)).encode())
     for leaf in leaves:
-        _update(h, leaf, depth + 1, seen)
+        _update(h, leaf, depth, seen)
 
 
 def _global_names(code: types.CodeType):

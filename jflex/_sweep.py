@@ -10,10 +10,13 @@ then lists every host's devices and the same ``sweep`` call shards each chunk ac
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
 import pathlib
+import time
+import types
 import zipfile
 from collections.abc import Callable
 
@@ -24,7 +27,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._allocator import tune_allocator
-from ._errors import DataError, ShapeError
+from ._errors import ConfigError, DataError, ShapeError
 from ._fingerprint import fingerprint
 from ._progress import bar
 
@@ -43,16 +46,47 @@ def _tune_allocator_once():
         tune_allocator()
 
 
-def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True, devices=None):
-    """A jitted batch version of a per-item ``fn``: evaluates it over the leading axis of its
-    arguments in blocks of ``batch_size`` (``lax.map``), so the working set of each block stays
-    in cache however large the batch.
+_PROGRAMS = ("vmap", "blocks", "unfused", "fastest")
+# lax.map block size when none is given: a block of a rigid-body kernel's working set stays in a
+# CPU core's cache at 1024 states; a GPU needs far more states in flight to fill its cores (an H100
+# keeps 132 x 2048 threads resident), so blocks there hold 2**18 states (a rule, not a measurement)
+_DEFAULT_BLOCK = {"cpu": 1024}
+_DEFAULT_BLOCK_ACCELERATOR = 1 << 18
 
-    ``fuse=False`` compiles one vmapped program without XLA's fusion pass (CPU only; no blocks),
-    which is fastest for the long elementwise rigid-body kernels ``rnea``, ``crba`` and ``aba``
-    (measured in ``benchmarks/bench_dynamics.py``, checked against Pinocchio in the tests). Keep
-    the default ``True`` for anything else: on jax 0.10.2, XLA:CPU without fusion also returned
-    wrong results for other programs (lax.map blocks; a modal linearisation's mass matrix).
+
+def default_batch_size(backend: str | None = None) -> int:
+    """The ``lax.map`` block size :func:`batched` uses on ``backend`` (default: JAX's default
+    backend) when ``batch_size`` is not given: 1024 states on CPU, 2**18 on GPU and TPU."""
+    backend = backend or jax.default_backend()
+    return _DEFAULT_BLOCK.get(backend, _DEFAULT_BLOCK_ACCELERATOR)
+
+
+def batched(fn: Callable, *, program: str | None = None, batch_size: int | None = None, fuse: bool | None = None,
+            devices=None):
+    """A jitted batch version of a per-item ``fn`` over the leading axis of its arguments.
+
+    ``program`` chooses how the batch is compiled:
+
+    - ``"vmap"`` (the default): one fused ``jax.jit(jax.vmap(fn))``. On the 7-joint Panda at
+      1e5 states it was the fastest program for ``rnea`` and ``aba`` and compiles quickest
+      (``benchmarks/bench_dynamics.py --section programs`` prints the figures).
+    - ``"blocks"``: ``lax.map`` over blocks of ``batch_size`` states (default
+      :func:`default_batch_size`: 1024 on CPU, 2**18 on GPU), so the working set of a block stays
+      in cache and memory is bounded by one block; faster than ``"vmap"`` for the long derivative
+      kernels (``rnea_derivatives``, ``aba_derivatives``) on CPU.
+    - ``"unfused"``: one vmapped program compiled without XLA's fusion pass (CPU only; elsewhere it
+      is ``"vmap"``). Fastest for ``crba`` on CPU, but it compiles 5-8x longer, and XLA:CPU
+      without fusion has returned wrong results for other programs (lax.map blocks, a modal
+      linearisation's mass matrix on jax 0.10.2): use it only for ``rnea``, ``crba`` and ``aba``,
+      which the tests check against Pinocchio.
+    - ``"fastest"``: at the first call for each set of argument shapes and dtypes, compile every
+      program above that applies to the backend, time each on that call's arguments and keep the
+      fastest whose results equal ``"vmap"``'s (to 1e-9 relative); later calls with those shapes run
+      it at once. The first call costs every candidate's compile time; ``.choice`` on the returned
+      function maps each shape signature to the program picked.
+
+    ``program=None`` keeps the older spelling working: ``fuse=False`` means ``"unfused"``, an
+    explicit ``fuse=True`` or a ``batch_size`` means ``"blocks"``, otherwise ``"vmap"``.
 
     ``devices``: split the batch evenly over these devices (``shard_map``; a batch that does not
     divide is padded with its last item, and the padding dropped). XLA:CPU runs one such program
@@ -63,19 +97,30 @@ def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True, devices=
     Like :func:`sweep`, it calls :func:`jflex.tune_allocator` (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
     """
     _tune_allocator_once()
-    cpu_unfused = not fuse and jax.default_backend() == "cpu"
-    options = {"xla_disable_hlo_passes": "fusion"} if cpu_unfused else None
-    if cpu_unfused:
-        # one vmapped program, no lax.map blocks: XLA:CPU (jax 0.10.2) miscompiles lax.map's loop
-        # body when fusion is off (RNEA and ABA came out wrong by O(1); crba did not), which
-        # tests/test_sweep_cli.py checks against the fused program
-        run = jax.vmap(fn)
-    else:
+    if program is None:
+        program = "unfused" if fuse is False else "blocks" if (fuse is True or batch_size is not None) else "vmap"
+    if program not in _PROGRAMS:
+        raise ConfigError(f"batched: program must be one of {', '.join(map(repr, _PROGRAMS))}, got {program!r}")
+    if batch_size is not None and int(batch_size) < 1:
+        raise ShapeError(f"batched: batch_size must be >= 1, got {batch_size}")
+    devices = list(devices) if devices is not None else []
+    if program == "fastest":
+        return _Fastest(fn, batch_size, devices)
+    return _compile_program(fn, program, batch_size, devices)
+
+
+def _compile_program(fn, program, batch_size, devices):
+    cpu = jax.default_backend() == "cpu"
+    options = {"xla_disable_hlo_passes": "fusion"} if program == "unfused" and cpu else None
+    if program == "blocks":
+        size = int(batch_size) if batch_size is not None else default_batch_size()
 
         def run(*args):
-            return jax.lax.map(lambda a: fn(*a), args, batch_size=batch_size)
-
-    devices = list(devices) if devices is not None else []
+            return jax.lax.map(lambda a: fn(*a), args, batch_size=size)
+    else:
+        # ("unfused" never runs lax.map: XLA:CPU (jax 0.10.2) miscompiled lax.map's loop body without
+        # fusion, RNEA and ABA came out wrong by O(1); tests/test_sweep_cli.py checks it)
+        run = jax.vmap(fn)
     if len(devices) <= 1:
         return jax.jit(run, compiler_options=options)
     nd = len(devices)
@@ -94,6 +139,144 @@ def batched(fn: Callable, *, batch_size: int = 1024, fuse: bool = True, devices=
         return jax.tree_util.tree_map(lambda a: a[:N], out) if pad else out
 
     return split
+
+
+class _Fastest:
+    """``batched(program="fastest")``: picks, per argument signature, the program that timed fastest."""
+
+    def __init__(self, fn, batch_size, devices):
+        self._fn, self._batch_size, self._devices = fn, batch_size, devices
+        self._programs = {}  # signature -> compiled callable
+        self.choice = {}  # signature -> program name
+
+    def __call__(self, *args):
+        leaves, treedef = jax.tree_util.tree_flatten(args)
+        sig = (treedef, tuple((np.shape(x), np.result_type(x).str) for x in leaves))
+        run = self._programs.get(sig)
+        if run is None:
+            run = self._programs[sig] = self._pick(sig, args)
+        return run(*args)
+
+    def _pick(self, sig, args):
+        names = ["vmap", "blocks"] + (["unfused"] if jax.default_backend() == "cpu" else [])
+        best, ref = None, None
+        for name in names:
+            run = _compile_program(self._fn, name, self._batch_size, self._devices)
+            out = jax.block_until_ready(run(*args))  # compiles
+            flat = [np.asarray(o) for o in jax.tree_util.tree_leaves(out)]
+            if ref is None:
+                ref = flat
+            elif not all(_close(a, b) for a, b in zip(flat, ref)):
+                continue  # a program that disagrees with the fused vmap is never chosen
+            t0 = time.perf_counter()
+            jax.block_until_ready(run(*args))
+            t = time.perf_counter() - t0
+            if best is None or t < best[0]:
+                best = (t, name, run)
+        self.choice[sig] = best[1]
+        return best[2]
+
+
+def _close(a, b) -> bool:
+    scale = float(np.max(np.abs(b), initial=0.0, where=np.isfinite(b))) if b.size else 0.0
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=0.0, atol=1e-9 * scale, equal_nan=True))
+
+
+# ---- sweep's compiled program, reused across calls --------------------------------------------
+# jax.jit caches a program per function object, and sweep used to wrap a fresh jax.vmap(fn) on
+# every call: every call compiled again. A function is split instead into a hashable template (its
+# code, or the function itself) and the values it closes over (closure cells, defaults,
+# functools.partial arguments, a bound method's object), and one module-level jitted program takes
+# the values as arguments: arrays in them are traced, so a second sweep of the same code over a
+# robot with other numbers (same shapes) reuses the compiled program.
+
+
+class _Code:
+    """A closure's code and globals (hashable): with its cells and defaults it is the function."""
+
+    __slots__ = ("code", "globals", "name", "kwdefaults")
+
+    def __init__(self, fn):
+        self.code, self.globals, self.name, self.kwdefaults = fn.__code__, fn.__globals__, fn.__name__, fn.__kwdefaults__
+
+    def __hash__(self):
+        return hash((self.code, id(self.globals)))
+
+    def __eq__(self, other):
+        return isinstance(other, _Code) and self.code is other.code and self.globals is other.globals
+
+    def build(self, cells, defaults):
+        f = types.FunctionType(self.code, self.globals, self.name, defaults, tuple(types.CellType(c) for c in cells))
+        f.__kwdefaults__ = self.kwdefaults
+        return f
+
+
+def _split(fn):
+    """``(template, values)`` with ``_rebuild(template, values)`` equivalent to ``fn``."""
+    if isinstance(fn, functools.partial):
+        t, v = _split(fn.func)
+        return ("partial", t, tuple(fn.keywords)), (v, fn.args, tuple(fn.keywords.values()))
+    if isinstance(fn, types.MethodType):
+        t, v = _split(fn.__func__)
+        return ("method", t), (v, fn.__self__)
+    if isinstance(fn, types.FunctionType) and (fn.__closure__ or fn.__defaults__) and not fn.__kwdefaults__:
+        try:
+            cells = tuple(c.cell_contents for c in fn.__closure__ or ())
+        except ValueError:  # an empty cell (a name assigned after the function was made)
+            return ("fn", fn), ()
+        return ("code", _Code(fn)), (cells, fn.__defaults__)
+    return ("fn", fn), ()
+
+
+def _rebuild(template, values):
+    kind = template[0]
+    if kind == "partial":
+        inner, args, kwvalues = values
+        return functools.partial(_rebuild(template[1], inner), *args, **dict(zip(template[2], kwvalues)))
+    if kind == "method":
+        inner, obj = values
+        return types.MethodType(_rebuild(template[1], inner), obj)
+    if kind == "code":
+        cells, defaults = values
+        return template[1].build(cells, defaults)
+    return template[1]
+
+
+@eqx.filter_jit
+def _vmapped(template, values, *items):
+    return jax.vmap(_rebuild(template, values))(*items)
+
+
+def _hashable(tree) -> bool:
+    """Whether eqx.filter_jit can key on the non-array parts of ``tree`` (it hashes them)."""
+    try:
+        hash(jax.tree_util.tree_structure(tree))
+        for leaf in jax.tree_util.tree_leaves(tree):
+            if not eqx.is_array(leaf):
+                hash(leaf)
+        return True
+    except TypeError:
+        return False
+
+
+_FALLBACK: dict = {}  # fn -> eqx.filter_jit(jax.vmap(fn)) for functions that cannot be split
+_FALLBACK_SIZE = 32
+
+
+def _sweep_program(fn):
+    """A callable ``items -> vmapped fn(items)`` whose compiled program outlives this sweep."""
+    template, values = _split(fn)
+    if _hashable(template) and _hashable(values):
+        return functools.partial(_vmapped, template, values)
+    try:
+        return _FALLBACK[fn]
+    except TypeError:  # an unhashable callable object: compiled for this call only
+        return eqx.filter_jit(jax.vmap(fn))
+    except KeyError:
+        if len(_FALLBACK) >= _FALLBACK_SIZE:
+            _FALLBACK.pop(next(iter(_FALLBACK)))
+        prog = _FALLBACK[fn] = eqx.filter_jit(jax.vmap(fn))
+        return prog
 
 
 def sweep(
@@ -130,6 +313,12 @@ def sweep(
       change (a model read from a file inside ``fn``, an object attribute it reads).
 
     **Returns:** the outputs for all N items as NumPy arrays (same pytree structure as ``fn``'s).
+    An empty batch (N = 0) returns empty arrays: leading axis 0, then the shape and dtype ``fn``
+    gives one item (``fn`` is traced once, never run; nothing is written to ``out_dir``).
+
+    The compiled program is kept: a second ``sweep`` of the same function, or of a new closure or
+    ``functools.partial`` of the same code over other arrays of the same shapes (another robot's
+    numbers), reuses it instead of compiling again.
 
     Calls :func:`jflex.tune_allocator` first (``JFLEX_TUNE_ALLOCATOR=0`` opts out): each chunk's
     outputs are then served from reused heap memory instead of fresh pages.
@@ -144,17 +333,22 @@ def sweep(
             raise ShapeError(f"sweep: every batched argument needs leading axis {N}, got shape {np.shape(leaf)}")
     if chunk_size < 1:
         raise ShapeError(f"sweep: chunk_size must be >= 1, got {chunk_size}")
+    out_path = _out_folder(out_dir)
+    if N == 0:
+        # an empty batch maps to empty outputs, as a NumPy function over an empty array does:
+        # every output leaf has leading axis 0 and the item shape and dtype fn gives one item
+        items = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(np.shape(a)[1:], np.result_type(a)), args)
+        shapes = jax.eval_shape(fn, *items)
+        return jax.tree_util.tree_map(lambda s: np.zeros((0, *s.shape), s.dtype), shapes)
     devices = list(devices) if devices is not None else jax.devices()
     nd = len(devices)
     chunk = min(chunk_size, N)
     chunk = int(math.ceil(chunk / nd) * nd)  # every device gets the same share
     mesh = Mesh(np.array(devices), ("batch",))
     sharding = NamedSharding(mesh, PartitionSpec("batch"))
-    vfn = eqx.filter_jit(jax.vmap(fn))
+    vfn = _sweep_program(fn)
 
-    out_path = pathlib.Path(out_dir) if out_dir is not None else None
     if out_path is not None:
-        out_path.mkdir(parents=True, exist_ok=True)
         identity = _identity(fn, args, N, chunk, key)
         _check_manifest(out_path, identity)
     treedef = None
@@ -190,6 +384,20 @@ def sweep(
 
 
 # ---- resumable chunks: fingerprints, atomic writes, refusal of anything stale ----------------
+
+
+def _out_folder(out_dir):
+    """``out_dir`` as a folder that exists, or a :class:`ConfigError` naming it."""
+    if out_dir is None:
+        return None
+    path = pathlib.Path(out_dir)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"sweep: out_dir {str(path)!r} is a file, not a folder: pass a folder (it is created if missing)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"sweep: out_dir {str(path)!r} cannot be created as a folder ({type(exc).__name__}: {exc})") from None
+    return path
 
 
 def _identity(fn, args, N, chunk, key) -> dict:
