@@ -8,7 +8,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import scipy.signal
 
 from .._errors import DataError
 from ._data import check_finite
@@ -32,6 +31,8 @@ def _window(window, n):
     if isinstance(window, tuple) and window[0] == "exponential":
         # Hammer tests: decay to window[1] (e.g. 0.01) of its start at the record end.
         return np.exp(np.log(window[1]) * np.arange(n) / (n - 1))
+    import scipy.signal  # loaded here: it costs seconds at import and only EMA needs it
+
     return scipy.signal.get_window(window, n, fftbins=True)
 
 
@@ -110,6 +111,8 @@ def peak_picking(freq, H, n_modes: int | None = None, *, freq_range=None, promin
         raise DataError(f"peak_picking: freq has {freq.shape[0]} points but H has {A.shape[0]}")
     mask = np.ones_like(freq, bool) if freq_range is None else (freq >= freq_range[0]) & (freq <= freq_range[1])
     Am = np.where(mask, A, 0.0)
+    import scipy.signal
+
     pk, props = scipy.signal.find_peaks(Am, prominence=prominence * Am.max())
     if n_modes is not None and len(pk) > n_modes:
         pk = np.sort(pk[np.argsort(-props["prominences"])[:n_modes]])
