@@ -71,6 +71,7 @@ _LAZY_MODULES = {
     "._sweep": ("batched", "sweep"),
     "._derivatives": ("aba_derivatives", "rnea_derivatives"),
     "._allocator": ("tune_allocator",),
+    "._compilation_cache": ("enable_compilation_cache",),
     "._config": ("available_robots", "load_robot", "robot_from_config"),
     ".linear": ("frf", "frf_sweep", "mac", "modal_analysis", "stability_lobes", "track_modes"),
     "._inputs": ("AbstractInput", "Brake", "Chirp", "Function", "Ramp", "Sampled", "Step", "Zero"),  # time responses
@@ -113,6 +114,7 @@ def __dir__():
 if _typing.TYPE_CHECKING:  # static tools see the eager imports
     from . import effects, fem, gap, identify, linear
     from ._allocator import tune_allocator
+    from ._compilation_cache import enable_compilation_cache
     from ._beam import Beam, beam_modal_matrices, beam_roots, clamped_free_frequencies, make_beam
     from ._config import available_robots, load_robot, robot_from_config
     from ._dh import from_dh
