@@ -4,7 +4,7 @@ how far it shrinks once that effect is added and refitted, judged on held-out da
 from ._case import Case as Case, Dataset as Dataset, EFFECT_NAMES as EFFECT_NAMES, load_case as load_case
 from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose
 from ._effect_term import EffectCandidate as EffectCandidate
-from ._noise import noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
+from ._noise import find_period as find_period, noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
 from ._selection import (
     EXPLAINED_SHRINK as EXPLAINED_SHRINK,
     MIN_GAP as MIN_GAP,
@@ -22,6 +22,8 @@ from ._selection import (
     rank_entries as rank_entries,
     step_record as step_record,
     verdict as verdict,
+    vetoed as vetoed,
+    worse_channels as worse_channels,
 )
 from ._report import write_report as write_report
 from ._demo import demo as demo

@@ -28,7 +28,8 @@ from ._response import cad_spread as cad_spread_response
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
 from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
-                         decisive, is_significant, rank_entries, step_record, stop_reason, verdict)
+                         decisive, is_significant, rank_entries, step_record, stop_reason, verdict, vetoed,
+                         worse_channels)
 from ._frequency_kinds import frequency_kinds
 from ._signatures import indistinguishable_from_inertia, n_params, signature_name, signatures
 from ._where import where
@@ -44,7 +45,7 @@ class Diagnosis:
     steps: list
 
 
-def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None):
+def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None, channel_floor=None, state=None):
     gap, fl, exc = gap_summary(ev, floor)
     _, _, exc0 = gap_summary(ev0, floor)
     shrink = 100.0 * (1 - exc / exc0) if exc0 > 0 else 0.0
@@ -54,10 +55,42 @@ def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None):
              link=problem.robot.link_names[c.joint] if on_link else None,
              score=float(score), gap_after=gap, shrink=float(np.clip(shrink, 0, 100)),
              shrink_raw=float(100 * (1 - gap / g0)) if g0 > 0 else 0.0,
-             per_dataset={k: v["nrmse"] for k, v in ev.items()})
+             per_dataset={k: v["nrmse"] for k, v in ev.items()},
+             per_channel={k: dict(v["channels"]) for k, v in ev.items()},
+             worse_channels=worse_channels(ev, ev0, channel_floor))
+    why = _implausible(problem, c, state)
+    if why:
+        e["implausible"] = why
     if sig is not None:
-        e["signature"] = {"name": signature_name(c.effect), "value": float(sig)}
+        e["signature"] = {"name": _torque_signature(signature_name(c.effect)), "value": float(sig)}
     return e
+
+
+def _torque_signature(text: str) -> str:
+    """A signature's description as the torque residual shows it (a signature value is computed on
+    torque data only): a kind described on both sides ("extra FRF peak ...; in torques, ...") keeps
+    its torque side."""
+    key = "in torques, "
+    return text[text.index(key) + len(key):] if key in text else text
+
+
+def _implausible(problem, cand, state):
+    """Why a candidate's fit in ``state`` is implausible (values no machine has), else None
+    (:func:`._torque_terms.implausible`, where the torque terms carry plausible ranges)."""
+    from . import _torque_terms as TT
+
+    f = getattr(TT, "implausible", None)
+    if f is None or state is None or not problem.ttrain:
+        return None
+    return f(problem, cand, state) or None
+
+
+def _channel_floors(details) -> dict:
+    return {k: dict(v.get("channels", {})) for k, v in details.items()}
+
+
+def _upper(details) -> dict:
+    return {k: v["high"] for k, v in details.items() if v.get("high") is not None}
 
 
 def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int = 10, progress=None) -> Diagnosis:
@@ -86,8 +119,8 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     say(f"nominal fit ({len(pb.ttrain)} torque, {len(pb.ftrain)} frf/modal training sets)")
     nom = pb.nominal_state()
     ev0 = pb.evaluate(nom)
-    floor_source = {}
-    floor = noise_floor(pb, ev0, case, floor_source)
+    floor_source, floor_details = {}, {}
+    floor = noise_floor(pb, ev0, case, floor_source, floor_details)
     cands = pb.candidates()
     sig = signatures(pb, nom, cands)
     held = indistinguishable_from_inertia(pb, cands)
@@ -118,7 +151,8 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
 
     fitted = None
     if pb.refit_nominal is not None:
-        nom, ev0, floor, floor_source, fitted = _choose_base(pb, case, nom, ev0, floor, floor_source, first_round)
+        nom, ev0, floor, floor_source, floor_details, fitted = _choose_base(pb, case, nom, ev0, floor, floor_source,
+                                                                            floor_details, first_round)
         if fitted is not None and not fitted:
             keep = []
     say(f"gap {gap_summary(ev0, floor)[0]:.2f} % (noise floor {gap_summary(ev0, floor)[1]:.2f} %), "
@@ -127,21 +161,16 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     if fitted is None:
         fitted = first_round(nom)
     keep = [c for c in keep if c in fitted]
-    # a model fitted on the training data reaches a held-out gap no lower than the noise (in
-    # expectation): the best candidate's gap bounds a floor estimated from one record, which a sharp
-    # unmodelled effect's harmonics can raise above it
-    for k in floor:
-        best = min((ev[k]["nrmse"] for _, ev in fitted.values() if k in ev), default=np.inf)
-        if best < floor[k]:
-            floor[k] = float(best)
-            floor_source[k] = f"{floor_source.get(k, '')} (bounded by the best candidate's held-out gap)".strip()
+    # (the floor is never bounded by a candidate's held-out gap: that would count the model error
+    # the candidate does not hold as noise)
+    cfloor, upper = _channel_floors(floor_details), _upper(floor_details)
     gap0, fl, exc0 = gap_summary(ev0, floor)
     for c in keep:
         st, ev = fitted[c]
         score = -ic_delta(ev, ev0, n_params(c, pb.user, bool(pb.ttrain), pb))
-        ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c)))
+        ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c), cfloor, st))
         say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
-    significant = is_significant(ev0, floor) or decisive(ranking)
+    significant = is_significant(ev0, floor, upper) or decisive(ranking)
     order = rank_entries(ranking)
     ranking = [ranking[i] for i in order]
     keep = [keep[i] for i in order]
@@ -189,6 +218,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     sel = forward_select(nom, ev0, floor, pool, refit, refine=refine, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain), pb), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select, significant=significant,
+                         channel_floor=cfloor, upper=upper, implausible=lambda c, st: _implausible(pb, c, st),
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of
                          # the excess is not named (the least bad candidate is not a diagnosis), unless it
                          # supplies a measured mode the model lacked (a missing degree of freedom)
@@ -196,7 +226,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                                                       else MIN_NAMED_SHRINK))
     selected = []
     for st in sel.steps:
-        selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score))
+        selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score, None, cfloor, st.state))
         selected[-1]["step_shrink"] = st.step_shrink
     steps = [step_record(None, ev0, floor)] + [step_record(st.cand.label(pb.names), st.ev, floor) for st in sel.steps]
     state, ev_cur = sel.state, sel.ev
@@ -210,8 +240,9 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                                   known_pair=pair in CONFOUNDED, shrink=[a["shrink"], b["shrink"]]))
     gap_after, _, exc_after = gap_summary(ev_cur, floor)
     shrink_total = float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0
-    verdict_ = verdict(significant, is_significant(ev_cur, floor), bool(sel.steps), shrink_total)
+    verdict_ = verdict(significant, is_significant(ev_cur, floor, upper), bool(sel.steps), shrink_total)
     reason = stop_reason(sel, pb.names)
+    failed_floor = {k: v["reason"] for k, v in floor_details.items() if v.get("failed")}
     spread = _cad_spread(pb, nom) if verdict_ == "unexplained" else {}
     if spread and not is_significant(ev0, {k: float(np.hypot(f, spread.get(k, 0.0))) for k, f in floor.items()}):
         # nothing explains the gap, and the CAD tolerance alone spreads the model that far on data
@@ -220,12 +251,25 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         reason = ("no candidate explains the gap, and it is within the spread that the CAD inertias' tolerance "
                   "gives on these data (" + ", ".join(f"{k}: {v:.2f} %" for k, v in spread.items()) +
                   "), which cannot identify the inertias: the data do not fault the nominal model")
-    wh = where(pb, ev0, floor, case)
+    if failed_floor:
+        # a gap cannot be judged against a noise level nobody knows: no confident verdict
+        verdict_ = "floor_unknown"
+        reason = ("the noise floor could not be estimated (" + "; ".join(f"{k}: {v}" for k, v in failed_floor.items()) +
+                  "): the gap is reported against no floor, and whether it exceeds the noise is unknown"
+                  + (f"; {reason}" if reason else ""))
+    wh = where(pb, ev0, floor, case, channel_floor=cfloor)
     moves, inertia_note = _inertia_report(pb, nom)
     result = dict(
         case=str(case.path), verdict=verdict_, stop_reason=reason, cad_spread=spread,
         gap_before=gap0, gap_after=gap_after, noise_floor=fl,
-        noise_floor_per_dataset=floor, noise_floor_source=floor_source, excess_before=exc0, excess_after=exc_after,
+        noise_floor_per_dataset=floor, noise_floor_source=floor_source, noise_floor_details=floor_details,
+        noise_floor_failed=failed_floor, excess_before=exc0, excess_after=exc_after,
+        gap_weighting=GAP_WEIGHTING,
+        channel_gaps=dict(before={k: dict(v["channels"]) for k, v in ev0.items()},
+                          after={k: dict(v["channels"]) for k, v in ev_cur.items()},
+                          weights={k: dict(v["weights"]) for k, v in ev0.items() if "weights" in v}),
+        excluded_channels={k: dict(v) for k, v in pb.excluded.items()}, conditioning=_jsonable(pb.conditioning),
+        vetoed=[dict(round=r_, candidate=c_.label(pb.names), reason=w_) for r_, c_, w_ in sel.vetoed],
         shrink=shrink_total, inertia_refit=moves, inertia=inertia_note,
         # candidates whose torques are a change of the refitted inertias on these motions: the refit's
         # tolerance, not the data, splits them from a CAD error
@@ -233,7 +277,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                                     relative_residual=float(v)) for c, v in held.items()],
 
         processing={s_.name: s_.processing for s_ in pb.ttrain + pb.tval if s_.processing},
-        significant=bool(significant), remaining_significant=bool(is_significant(ev_cur, floor)),
+        significant=bool(significant), remaining_significant=bool(is_significant(ev_cur, floor, upper)),
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
         parameters=parameters(pb, state), nominal_parameters=parameters(pb, nom),
         unmatched_modes=[w for w in wh if w.get("unmatched")],
@@ -245,6 +289,24 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         units={"gap": "NRMSE %", "noise_floor": "NRMSE %", "shrink": "% of the excess over noise closed"},
     )
     return Diagnosis(result, pb, nom, state, steps)
+
+
+GAP_WEIGHTING = ("torque sets: residual energy over torque-signal energy pooled over the joints, "
+                 "sqrt(sum_j mse_j / sum_j std(tau_j)^2): each joint's NRMSE^2 weighs by its share of the signal "
+                 "energy; channels left out of the gap excluded")
+
+
+def _jsonable(x):
+    """``x`` with numpy values as plain Python (the data layer's conditioning records)."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
 
 
 SCREEN_THREADS = 2  # simulated screenings run side by side in the first round (3 tip springs: 60 -> 47 s on 2 cores)
@@ -270,7 +332,7 @@ def _cad_spread(pb: Problem, nom: State) -> dict:
     return cad_spread(nom.lm, nom.x, pb.fval, li["prior"])
 
 
-def _choose_base(pb: Problem, case, nom, ev0, floor, floor_source, first_round):
+def _choose_base(pb: Problem, case, nom, ev0, floor, floor_source, floor_details, first_round):
     """The nominal model the candidates build on, when the frequency data offered a refit of the CAD
     inertias (:meth:`Problem._refit_linear_inertia`): the refit and a candidate effect on CAD both
     change the model, so they are judged alike, on held-out data. Refitted, the nominal model within
@@ -282,25 +344,25 @@ def _choose_base(pb: Problem, case, nom, ev0, floor, floor_source, first_round):
     li = pb.lin_inertia
     alt = pb.refit_nominal
     ev_alt = pb.evaluate(alt)
-    src_alt = {}
-    floor_alt = noise_floor(pb, ev_alt, case, src_alt)
+    src_alt, det_alt = {}, {}
+    floor_alt = noise_floor(pb, ev_alt, case, src_alt, det_alt)
 
     def freq_gap(ev):
         v = [e["nrmse"] ** 2 for e in ev.values() if e["kind"] in ("frf", "modal")]
         return float(np.sqrt(np.mean(v))) if v else np.inf
 
-    if not is_significant(ev_alt, floor_alt):
+    if not is_significant(ev_alt, floor_alt, _upper(det_alt)):
         li.update(used=True, reason="the refitted nominal model is within noise on the held-out data")
-        return alt, ev_alt, floor_alt, src_alt, {}
+        return alt, ev_alt, floor_alt, src_alt, det_alt, {}
     fitted = first_round(nom)
     best = min(fitted, key=lambda c: freq_gap(fitted[c][1]), default=None)
     if best is not None and freq_gap(fitted[best][1]) < freq_gap(ev_alt):
         li.update(used=False, reason=(f"CAD kept: {best.label(pb.names)} on CAD predicts the held-out data better "
                                       f"({freq_gap(fitted[best][1]):.2f} %) than the inertial refit ({freq_gap(ev_alt):.2f} %)"))
-        return nom, ev0, floor, floor_source, fitted
+        return nom, ev0, floor, floor_source, floor_details, fitted
     li.update(used=True, reason=(f"no candidate on CAD predicts the held-out data better than the inertial refit "
                                  f"({freq_gap(ev_alt):.2f} %)"))
-    return alt, ev_alt, floor_alt, src_alt, None
+    return alt, ev_alt, floor_alt, src_alt, det_alt, None
 
 
 def _inertia_report(pb: Problem, nom: State):

@@ -31,14 +31,20 @@ def torque_traces(plt, out: pathlib.Path, robot: str, s, names, tau_nominal, tau
     """Measured, nominal and final joint torques of one torque set over time (left) and the two
     models' errors (right), one row per joint. ``gaps``: (nominal, final) NRMSE [%] of the set."""
     n = s.tau.shape[1]
+    same = bool(np.array_equal(np.asarray(tau_nominal), np.asarray(tau_final)))
     fig, axs = plt.subplots(n, 2, figsize=(12, 1.9 * n + 1.0), squeeze=False, sharex=True)
     for j in range(n):
         ax, ax2 = axs[j]
         _line(ax, s.t, s.tau[:, j], MEASURED, "measured")
-        _line(ax, s.t, tau_nominal[:, j], NOMINAL, "nominal model")
-        _line(ax, s.t, tau_final[:, j], FINAL, "final model")
-        _line(ax2, s.t, tau_nominal[:, j] - s.tau[:, j], NOMINAL, "nominal - measured")
-        _line(ax2, s.t, tau_final[:, j] - s.tau[:, j], FINAL, "final - measured")
+        if same:
+            # nothing was selected: one model, drawn once (a final curve would hide the nominal one)
+            _line(ax, s.t, tau_nominal[:, j], NOMINAL, "nominal = final model (nothing selected)")
+            _line(ax2, s.t, tau_nominal[:, j] - s.tau[:, j], NOMINAL, "nominal - measured")
+        else:
+            _line(ax, s.t, tau_nominal[:, j], NOMINAL, "nominal model")
+            _line(ax, s.t, tau_final[:, j], FINAL, "final model")
+            _line(ax2, s.t, tau_nominal[:, j] - s.tau[:, j], NOMINAL, "nominal - measured")
+            _line(ax2, s.t, tau_final[:, j] - s.tau[:, j], FINAL, "final - measured")
         ax2.axhline(0.0, color="k", lw=0.5)
         ax.set_ylabel(f"{names[j]}\ntorque [N m]")
         ax2.set_ylabel("error [N m]")
@@ -52,8 +58,10 @@ def torque_traces(plt, out: pathlib.Path, robot: str, s, names, tau_nominal, tau
     name = f"torque_{safe_name(s.name)}.png"
     fig.savefig(out / name, dpi=DPI)
     plt.close(fig)
-    cap = (f"Joint torques of the validation set '{s.name}', which no fit saw: measured (black), the nominal model "
-           "(blue, dashed) and the final model with the selected effects (red). Right: each model's error. "
+    models = ("the nominal model (blue, dashed), which is also the final model: no effect was selected. Right: its error. "
+              if same else "the nominal model (blue, dashed) and the final model with the selected effects (red). Right: "
+              "each model's error. ")
+    cap = (f"Joint torques of the validation set '{s.name}', which no fit saw: measured (black), " + models
            + ("The measured torque is shown low-passed by the same filter as the models (parallel filtering): "
               f"{s.cutoff:.1f} Hz. " if getattr(s, "cutoff", None) else "")
            + "The gap of a set is the RMS of the error divided by the RMS variation of the measured torque, per joint.")
@@ -86,12 +94,15 @@ def frf_bode(plt, out: pathlib.Path, robot: str, d, H_nominal, H_final, gaps) ->
     diag = [e for e in entries if e[0] == e[1]]
     shown = (diag or entries)[:3]
     coh, coh_src = coherence(a)
+    same = bool(np.array_equal(np.asarray(H_nominal), np.asarray(H_final)))
     rows = 3 if coh is not None else 2
     fig, axs = plt.subplots(rows, len(shown), figsize=(4.6 * len(shown) + 0.6, 2.4 * rows + 1.0), squeeze=False,
                             sharex=True, gridspec_kw={"height_ratios": [2, 1.3, 0.8][:rows]})
     for c, (i, j) in enumerate(shown):
         nm = f"H_{'xyz'[i]}{'xyz'[j]}"
-        for Hs, st, lab in ((H, MEASURED, "measured"), (H_nominal, NOMINAL, "nominal model"), (H_final, FINAL, "final model")):
+        curves = (((H, MEASURED, "measured"), (H_nominal, NOMINAL, "nominal = final model (nothing selected)")) if same else
+                  ((H, MEASURED, "measured"), (H_nominal, NOMINAL, "nominal model"), (H_final, FINAL, "final model")))
+        for Hs, st, lab in curves:
             _line(axs[0, c], f, np.abs(Hs[:, i, j]), st, lab)
             _line(axs[1, c], f, np.degrees(np.unwrap(np.angle(Hs[:, i, j]))), st, lab)
         axs[0, c].set_yscale("log")
@@ -116,8 +127,9 @@ def frf_bode(plt, out: pathlib.Path, robot: str, d, H_nominal, H_final, gaps) ->
     plt.close(fig)
     skipped = len(entries) - len(shown)
     cap = (f"Tool receptance of the validation set '{d.name}' at its posture: magnitude (top, log-log) and phase "
-           "(middle, unwrapped) of the measured FRF (black), the nominal model (blue, dashed) and the final model "
-           "(red); H_ab is the displacement along a for a force along b, in the tool frame. "
+           "(middle, unwrapped) of the measured FRF (black), "
+           + ("the nominal model (blue, dashed), which is also the final model (no effect was selected)" if same else
+              "the nominal model (blue, dashed) and the final model (red)") + "; H_ab is the displacement along a for a force along b, in the tool frame. "
            + (f"Bottom: the coherence ({coh_src}); the measured curve is unreliable where it falls well below 1. "
               if coh is not None else "The data set gives no coherence. ")
            + (f"{skipped} more entries enter the gap but are not drawn. " if skipped > 0 else ""))

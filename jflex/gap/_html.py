@@ -18,6 +18,7 @@ from ._selection import MIN_NAMED_SHRINK, MIN_STEP_SHRINK
 
 SECTIONS = {
     "summary": "Verdict",
+    "data": "The data: channels left out and conditioning",
     "selected": "Selected effects and why",
     "model": "The model: nominal effects and fitted parameters",
     "datasets": "Measured against nominal and final model, per validation data set",
@@ -31,8 +32,11 @@ TERMS = [
     ("gap", "the validation NRMSE [%] of a model on data no fit saw: torques rms(model - measured) / std(measured) "
             "per joint; FRFs sqrt(sum |H_model - H|^2 / sum |H|^2); modal tables the RMS relative frequency error "
             "(plus 0.1 x the damping error)."),
-    ("noise floor", "the gap that measurement noise alone would leave (from repeated records, else from the "
-                    "residual's high-frequency content): no model does better."),
+    ("noise floor", "the gap that measurement noise alone would leave, never estimated from a candidate model: from "
+                    "repeated records, else the scatter of the torque between the periods of a periodic motion, else "
+                    "what a flexible black-box model of the motion cannot predict on held-out samples (an upper "
+                    "bound); with its 95 % interval. No model does better. A torque set's gap and floor pool the "
+                    "joints: residual energy over torque-signal energy, so a joint weighs by its share of the signal."),
     ("excess", "sqrt(gap^2 - floor^2): the part of the gap a model can close."),
     ("shrink", "the percentage of the nominal model's excess that a model closes (100 % = down to the noise)."),
     ("step shrink", "the percentage of the excess left before a step that the step's effect closes."),
@@ -50,7 +54,41 @@ VERDICTS = {
     "partly_explained": "an effect was named but a significant gap remains",
     "unexplained": "no effect of the candidate library closes enough of the gap to be named",
     "within_noise": "the nominal model's gap is already within the noise floor",
+    "floor_unknown": "the noise floor could not be estimated, so whether the gap exceeds the noise is unknown",
 }
+
+
+def floor_sentence(r: dict) -> str:
+    """How the noise floor was estimated, per validation set, with its 95 % interval; a failed
+    estimate said as such."""
+    parts = []
+    for k, d in (r.get("noise_floor_details") or {}).items():
+        if d.get("failed"):
+            parts.append(f"{k}: estimate failed ({d.get('reason')}), the floor is unknown")
+        elif d.get("low") is not None and d.get("high") is not None and d["high"] > d["low"]:
+            parts.append(f"{k}: {d['floor']:.2f} % (95 % interval {d['low']:.2f}-{d['high']:.2f} %) from {d.get('method')}")
+        else:
+            parts.append(f"{k}: {d['floor']:.2f} % from {d.get('method')}")
+    return ("Noise floor per validation set: " + "; ".join(parts) + ".") if parts else ""
+
+
+def data_notes(r: dict) -> list[str]:
+    """Sentences on the data: the channels left out of the gap and why, and what the data
+    conditioning did to each record."""
+    out = []
+    for k, chans in (r.get("excluded_channels") or {}).items():
+        out.append(f"Left out of the gap in '{k}': " + "; ".join(f"{c} ({w})" for c, w in chans.items()) + ".")
+    for k, cond in (r.get("conditioning") or {}).items():
+        if isinstance(cond, dict) and cond:
+            out.append(f"Conditioning of '{k}': " + "; ".join(f"{a}: {_short(b)}" for a, b in cond.items()) + ".")
+        elif cond:
+            out.append(f"Conditioning of '{k}': {_short(cond)}.")
+    return out
+
+
+def _short(x, n=160) -> str:
+    t = str(x)
+    return t if len(t) <= n else t[:n - 3] + "..."
 
 
 def _e(x) -> str:
@@ -80,6 +118,23 @@ def where_label(entry) -> str:
     return f"{e['effect']}@{e['joint']}" if e.get("joint") else (f"{e['effect']}@{e['link']}" if e.get("link") else e["effect"])
 
 
+def bound_words(m: dict) -> str:
+    """The 'at tolerance bound' cell of a link: which parameters reached it, and by how much."""
+    if not m.get("at_tolerance_bound"):
+        return "no"
+    b = m.get("bound_parameters")
+    return "yes: " + ", ".join(b) if b else "yes"
+
+
+def placed(effect: str, where) -> str:
+    """An effect and where it sits, in words (an effect of no joint, e.g. a sensor's delay, alone)."""
+    return effect if where in (None, "", "None") else f"{effect} at {where}"
+
+
+def significance_words(significant: bool) -> str:
+    return "significant (above the noise floor)" if significant else "not significant (within the noise floor)"
+
+
 def payload_summary(params: dict, robot, tool_frame) -> dict | None:
     """The fitted payload as mass [kg] and centre of mass [m] in the tool frame (or the last link's
     frame when the case names no tool frame on it); None when no payload was fitted."""
@@ -87,7 +142,11 @@ def payload_summary(params: dict, robot, tool_frame) -> dict | None:
         p = params["torque"]["payload"]
         m = float(p["m [kg]"])
         mc = np.array([p["m cx [kg m]"], p["m cy [kg m]"], p["m cz [kg m]"]], dtype=float)
-        c_link = mc / m if m > 0 else np.zeros(3)
+        why = _nonphysical(m, mc, p)
+        if why:
+            return dict(mass_kg=m, com_m=None, frame=None, side="torque data (10 inertial parameters fitted)",
+                        nonphysical=why)
+        c_link = mc / m
         last = robot.nq - 1
         frame = f"last link frame ({robot.link_names[last]})"
         c = c_link
@@ -108,7 +167,31 @@ def payload_summary(params: dict, robot, tool_frame) -> dict | None:
     return None
 
 
+def _nonphysical(m: float, mc, p: dict) -> str | None:
+    """Why fitted payload parameters describe no rigid body (None when they do): a mass that is not
+    positive, or an inertia about the centre of mass that is not positive semi-definite or breaks
+    the triangle inequality."""
+    if not np.isfinite(m) or m <= 1e-9:
+        return f"mass {m:.3g} kg (not positive)"
+    keys = ("Ixx [kg m^2]", "Ixy [kg m^2]", "Iyy [kg m^2]", "Ixz [kg m^2]", "Iyz [kg m^2]", "Izz [kg m^2]")
+    if not all(k in p for k in keys):
+        return None
+    xx, xy, yy, xz, yz, zz = (float(p[k]) for k in keys)
+    I_o = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    c = np.asarray(mc, float) / m
+    I_c = I_o - m * (c @ c * np.eye(3) - np.outer(c, c))
+    ev = np.linalg.eigvalsh(I_c)
+    tol = 1e-9 * max(float(np.max(np.abs(ev))), 1e-12)
+    if ev[0] < -tol or ev[2] > ev[0] + ev[1] + tol:
+        return ("rotational inertia about its centre of mass with principal moments "
+                + ", ".join(f"{v:.3g}" for v in ev) + " kg m^2 (no rigid body has these)")
+    return None
+
+
 def payload_line(pl: dict) -> str:
+    if pl.get("nonphysical"):
+        return (f"payload fitted on {pl['side']} is non-physical: {pl['nonphysical']}; it is not a load the "
+                "robot carries (the payload columns stand in for another model error)")
     c = 1e3 * np.asarray(pl["com_m"])
     return (f"payload {pl['mass_kg']:.3f} kg, centre of mass at ({c[0]:.1f}, {c[1]:.1f}, {c[2]:.1f}) mm "
             f"in the {pl['frame']}, fitted on {pl['side']}")
@@ -179,13 +262,21 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
     v = r.get("verdict", "")
     H.append(f"<p class='verdict'><b>{_e(v.replace('_', ' '))}</b>: {_e(VERDICTS.get(v, ''))}. "
              f"The search stopped because {_e(r.get('stop_reason', ''))}.</p>")
+    H.append(f"<p>{_e(floor_sentence(r))}</p>")
     H.append(f"<p>Validation gap <b>{r['gap_before']:.2f} %</b> with the nominal model, <b>{r['gap_after']:.2f} %</b> "
              f"with the final one; noise floor {r['noise_floor']:.2f} %. The nominal gap is "
-             f"{'' if r['significant'] else 'not '}significant; the selected effects closed <b>{r['shrink']:.0f} %</b> "
+             f"{significance_words(r['significant'])}; the selected effects closed <b>{r['shrink']:.0f} %</b> "
              f"of its excess over the noise, and what remains is {'still' if r['remaining_significant'] else 'not'} "
              "significant.</p>")
     if payload:
         H.append(f"<p><b>{_e(payload_line(payload)).capitalize()}.</b></p>")
+    notes = data_notes(r)
+    if notes:
+        sec("data")
+        H.append("<ul>" + "".join(f"<li>{_e(x)}</li>" for x in notes) + "</ul>")
+    if r.get("vetoed"):
+        H.append("<p>Candidates never named: " + "; ".join(
+            f"{_e(v['candidate'])} ({_e(v['reason'])})" for v in r["vetoed"][:10]) + ".</p>")
 
     sec("selected")
     if r["selected"]:
@@ -199,8 +290,8 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
         H.append("<p>No effect was selected: " + _e(r.get("stop_reason", "")) + ".</p>")
     if r.get("ambiguous"):
         for a in r["ambiguous"]:
-            H.append(f"<p><b>Ambiguous:</b> {_e(a['effects'][0])} ({_e(a['joints'][0])}) and {_e(a['effects'][1])} "
-                     f"({_e(a['joints'][1])}) close {a['shrink'][0]:.0f} % and {a['shrink'][1]:.0f} % of the excess"
+            H.append(f"<p><b>Ambiguous:</b> {_e(placed(a['effects'][0], a['joints'][0]))} and "
+                     f"{_e(placed(a['effects'][1], a['joints'][1]))} close {a['shrink'][0]:.0f} % and {a['shrink'][1]:.0f} % of the excess"
                      f"{' (a known confounded pair)' if a['known_pair'] else ''}: more data sets or postures are needed "
                      "to tell them apart.</p>")
 
@@ -236,7 +327,7 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
         H.append(_table(["link", "mass CAD [kg]", "mass fitted [kg]", "change [%]", "COM shift [mm]", "at tolerance bound"],
                         [[_e(m["link"]), _num(m["mass_cad_kg"], 3), _num(m["mass_kg"], 3),
                           "-" if m["mass_change_pct"] is None else f"{m['mass_change_pct']:+.1f}",
-                          _num(1e3 * m["com_shift_m"], 1), "yes" if m["at_tolerance_bound"] else "no"] for m in moves]))
+                          _num(1e3 * m["com_shift_m"], 1), _e(bound_words(m))] for m in moves]))
 
     sec("datasets")
     for name, (kind, g0, g1, fl, src) in set_gaps.items():

@@ -84,9 +84,16 @@ def tolerance_spread(prior: InertiaPrior, residuals, step: float = 1e-3) -> dict
     return {k: float(np.sqrt(v) * 100) for k, v in acc.items()}
 
 
+# the 10 inertial parameters of a link (Pinocchio order) and their units
+PARAM_NAMES = ("m", "m cx", "m cy", "m cz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+PARAM_UNITS = ("kg", "kg m", "kg m", "kg m", "kg m^2", "kg m^2", "kg m^2", "kg m^2", "kg m^2", "kg m^2")
+
+
 def link_moves(robot, pi0, delta, prior: InertiaPrior | None = None) -> list[dict]:
     """Per link: mass and centre of mass before (CAD) and after the refit, and whether a bound was
-    reached (the CAD tolerance did not suffice: a sign of a payload or a grossly wrong CAD)."""
+    reached (the CAD tolerance did not suffice: a sign of a payload or a grossly wrong CAD), with
+    the parameters at their bound and their change (``bound_parameters``; a rotational inertia
+    may reach it while mass and centre of mass barely move)."""
     P0 = np.asarray(pi0, float).reshape(-1, 10)
     P1 = P0 + np.asarray(delta, float).reshape(-1, 10)
     lo, hi = prior.bounds() if prior is not None else (None, None)
@@ -97,14 +104,20 @@ def link_moves(robot, pi0, delta, prior: InertiaPrior | None = None) -> list[dic
         ca = a[1:4] / a[0] if abs(a[0]) > 1e-12 else np.zeros(3)
         cb = b[1:4] / b[0] if abs(b[0]) > 1e-12 else np.zeros(3)
         d = np.asarray(delta, float).reshape(-1, 10)[i]
-        at_bound = False
+        at_bound, which = False, []
         if lo is not None:
             l, h = lo.reshape(-1, 10)[i], hi.reshape(-1, 10)[i]
-            at_bound = bool(np.any(np.abs(d - l) < 1e-6 * np.abs(l)) or np.any(np.abs(d - h) < 1e-6 * np.abs(h)))
+            hit = (np.abs(d - l) < 1e-6 * np.abs(l)) | (np.abs(d - h) < 1e-6 * np.abs(h))
+            # a parameter held at zero (a massless frame's: both bounds ~0) is no bound reached
+            hit &= np.abs(h - l) > 1e-9 * max(float(np.max(np.abs(h - l))), 1e-300)
+            at_bound = bool(np.any(hit))
+            which = [f"{PARAM_NAMES[k]} {'+' if abs(d[k] - h[k]) <= abs(d[k] - l[k]) else '-'}{abs(d[k]):.4g} {PARAM_UNITS[k]}"
+                     for k in np.flatnonzero(hit)]
         out.append({
             "link": robot.link_names[i], "mass_cad_kg": float(a[0]), "mass_kg": float(b[0]),
             "mass_change_pct": float(100 * (b[0] - a[0]) / a[0]) if abs(a[0]) > 1e-12 else None,
             "com_cad_m": [float(v) for v in ca], "com_m": [float(v) for v in cb],
             "com_shift_m": float(np.linalg.norm(cb - ca)), "at_tolerance_bound": at_bound,
+            "bound_parameters": which,
         })
     return out

@@ -28,48 +28,62 @@ def repeats_factor(rep, x) -> float:
     return 1.0
 
 
-def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = None) -> dict:
-    """NRMSE [%] that noise alone leaves, per validation data set.
+def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = None,
+                details: dict | None = None) -> dict:
+    """NRMSE [%] that noise alone leaves, per validation data set; never estimated from a candidate
+    model's residual (a model error a candidate does not hold would then count as noise).
 
-    Torque: from ``tau_repeats`` when recorded (over sqrt(R) when ``tau`` is their mean), else the robust (MAD) spread of the residual's
-    second difference, ``sigma = MAD(d2 r) / sqrt(6)`` (white noise: var(d2) = 6 sigma^2; the
-    smooth model error barely enters, and the median ignores the few jumps at reversals).
-    FRF: ``H_repeats`` when recorded (likewise), else the same on the real and imaginary parts of the
-    residual along frequency. Modal tables: :func:`modal_floor`.
+    Torque (the gap's measure: the residual energy over the torque-signal energy pooled over the
+    joints, channels left out of the gap excluded): from ``tau_repeats`` when recorded (over
+    sqrt(R) when ``tau`` is their mean); else, when the motion is periodic (an excitation
+    trajectory repeated, as identification logs are), from the scatter of the torque between
+    periods (:func:`periodic_noise`); else from split-half cross-validation of a flexible
+    black-box model of the nominal residual (:func:`black_box_noise`: what a smooth function of
+    the motion cannot predict on held-out samples, an upper bound of the noise that does not count
+    structured model error).
+    FRF: ``H_repeats`` when recorded (likewise), else the residual's second difference along
+    frequency. Modal tables: :func:`modal_floor`.
     Output-error (tip) sets: ``y_repeats`` when recorded, else per channel the smaller of the
     residual's second-difference estimate and the record's own fourth difference,
     ``MAD(d4 y) / sqrt(70)`` (a nominal simulation that drifts or runs away fast leaves
     high-frequency content in the residual, not in the record; smooth motion barely enters d4).
-    ``sources``: optional mapping filled with the estimate used per data set.
+    ``sources``: optional mapping filled with the method used per data set; ``details``: optional
+    mapping filled per data set with ``method``, ``floor``, its 95 % interval ``low``/``high``
+    (chi-square on the variance estimate, ``dof`` effective degrees of freedom), ``channels``
+    (each channel's floor [%]), and ``failed`` with ``reason`` when the estimate is unusable (0,
+    not finite, or at least a trivial model's gap, 100 %): the floor is then unknown (reported 0).
     """
     out = {}
     src = {} if sources is None else sources
+    det = {} if details is None else details
     by_name = {d.name: d for d in case.datasets}
     for name, r in ev.items():
         d = by_name[name]
+        info = {}
         if r["kind"] == "torque":
             s = next(s for s in problem.tval if s.name == name)
-            if "tau_repeats" in d.arrays and s.cutoff is None:
-                src[name] = "propagated angle noise" if d.kind == "response" else "tau_repeats"
+            m = problem.included(name) if hasattr(problem, "included") else np.ones(s.scale.shape, bool)
+            if "tau_repeats" in d.arrays:
                 rep = d.arrays["tau_repeats"]
-                sig = rep.std(axis=0, ddof=1).mean(axis=0) / s.scale / repeats_factor(rep, d.arrays["tau"])
-            elif "tau_repeats" in d.arrays:
-                # repeats of raw torques through the same low-pass as the data
-                rep = d.arrays["tau_repeats"]
-                rf = np.stack([s.lp(r)[::s.processing.get("decimate", 1)] for r in rep])
-                sig = rf.std(axis=0, ddof=1).mean(axis=0) / s.scale / repeats_factor(rep, d.arrays["tau"])
-                src[name] = "tau_repeats (filtered)"
-            elif s.noise is not None:
-                # angle-only log: what the processing predicts (raw torque spectrum above the motion
-                # band through the filter, plus the angle noise propagated through the model)
-                sig = s.noise / s.scale
-                src[name] = "filtered torque spectrum + propagated angle noise"
+                if s.cutoff is None:
+                    src[name] = "propagated angle noise" if d.kind == "response" else "tau_repeats"
+                else:
+                    # repeats of raw torques through the same low-pass as the data
+                    rep = np.stack([s.lp(r_)[::s.processing.get("decimate", 1)] for r_ in rep])
+                    src[name] = "tau_repeats (filtered)"
+                k = repeats_factor(d.arrays["tau_repeats"], d.arrays["tau"])
+                sig = rep.std(axis=0, ddof=1).mean(axis=0) / k
+                dof = np.full(sig.shape, float((rep.shape[0] - 1) * rep.shape[1]))
             else:
-                e = r["resid"]
-                d2 = e[2:] - 2 * e[1:-1] + e[:-2]
-                sig = np.array([robust_sigma(d2[:, j]) / np.sqrt(6) for j in range(e.shape[1])])
-                src[name] = "residual second difference"
-            out[name] = float(np.sqrt(np.mean(sig**2)) * 100)
+                per = periodic_noise(s.t, s.q, s.tau, m)
+                if per is not None:
+                    sig, dof, info = per
+                    src[name] = (f"scatter between periods ({info['periods']} periods of {info['period_s']:.4g} s"
+                                 f"{', linear drift cancelled' if info['drift_cancelled'] else ''})")
+                else:
+                    sig, dof, info = black_box_noise(s, r["resid"] * s.scale, m)
+                    src[name] = "black-box split-half cross-validation (upper bound)"
+            out[name], info = _pooled(sig, dof, s.scale, m, problem.names, info)
         elif r["kind"] == "response":
             # output error: white measurement noise on y, the same estimates on the residual
             s = next(s for s in problem.rval if s.name == name)
@@ -88,11 +102,193 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
                 src[name] = ("residual second difference" if np.sum(s2**2) <= np.sum(s4**2) else
                              "record fourth difference")
             out[name] = float(np.sqrt(np.mean(sig**2)) * 100)
+            info = dict(channels={c: float(v * 100) for c, v in zip(s.channels, sig)})
         elif r["kind"] == "frf":
             out[name], src[name] = frf_floor(d.arrays, r["err"])
         else:
             out[name], src[name] = modal_floor(case, d.arrays.get("zeta"))
+        v = out[name]
+        info = dict(info, method=src[name], floor=float(v) if np.isfinite(v) else None)
+        info.setdefault("low", info["floor"])
+        info.setdefault("high", info["floor"])
+        if not np.isfinite(v) or v <= FLOOR_MIN or v >= TRIVIAL_GAP:
+            info.update(failed=True, reason=("not a finite number" if not np.isfinite(v) else
+                                             "zero: the estimate saw no noise at all" if v <= FLOOR_MIN else
+                                             f"{v:.3g} %, at least the gap of a model that predicts the mean (100 %)"),
+                        low=None, high=None)
+            out[name] = 0.0
+        else:
+            info["failed"] = False
+        det[name] = info
     return out
+
+
+FLOOR_MIN = 1e-9  # [%] a floor at or below this saw no noise: failed
+TRIVIAL_GAP = 100.0  # [%] the NRMSE of predicting each channel by its mean: a floor at or above it failed
+CONFIDENCE = 0.95  # of the floor's interval (chi-square on the variance estimate)
+
+
+def _pooled(sig, dof, scale, m, names, info):
+    """The set's floor [%] from per-channel noise ``sig`` [N m] with ``dof`` degrees of freedom:
+    noise energy over torque-signal energy of the included channels ``m`` (the gap's measure), its
+    interval (Satterthwaite's degrees of freedom of the pooled variance, chi-square interval)."""
+    from scipy.stats import chi2
+
+    sig, dof, scale = (np.asarray(v, float) for v in (sig, dof, scale))
+    w = np.where(m, 1.0, 0.0)
+    var = np.sum(w * sig**2)
+    en = np.sum(w * scale**2)
+    floor = float(np.sqrt(var / en) * 100) if en > 0 else float("nan")
+    parts = w * sig**2
+    nu = float(var**2 / np.sum(np.where(m, parts**2 / np.maximum(dof, 1.0), 0.0))) if var > 0 else 0.0
+    info = dict(info, dof=nu, channels={names[j]: float(sig[j] / scale[j] * 100) for j in range(len(names)) if m[j]})
+    if nu >= 1 and np.isfinite(floor):
+        a = 1 - CONFIDENCE
+        info["low"] = float(floor * np.sqrt(nu / chi2.ppf(1 - a / 2, nu)))
+        info["high"] = float(floor * np.sqrt(nu / chi2.ppf(a / 2, nu)))
+    return floor, info
+
+
+def effective_samples(x, extra_lags=()) -> float:
+    """Effective number of independent samples of the variance of ``x`` (N,): ``N / sum rho_k^2``
+    (the variance of a Gaussian process's sample variance, Bartlett), the autocorrelation summed
+    over the short lags until it falls inside its noise and at ``extra_lags`` (known correlations)."""
+    x = np.asarray(x, float) - np.mean(x)
+    N = len(x)
+    if N < 4 or not np.any(x):
+        return float(max(N, 1))
+    F = np.fft.rfft(x, 2 * N)
+    ac = np.fft.irfft(np.abs(F) ** 2)[:N]
+    ac = ac / ac[0]
+    lim = 2.0 / np.sqrt(N)
+    k = int(np.argmax(np.abs(ac[1:]) < lim)) + 1 if np.any(np.abs(ac[1:]) < lim) else N // 4
+    tot = 1.0 + 2.0 * np.sum(ac[1:min(2 * k, N // 4) + 1] ** 2)
+    tot += 2.0 * sum(ac[L] ** 2 for L in extra_lags if 2 * k < L < N)
+    return float(N / tot)
+
+
+REPEAT_TOL = 0.02  # the angles repeat from period to period within 2 % of their spread
+PERIOD_ACF = 0.9  # the angles' autocorrelation at the period
+
+
+def find_period(q) -> int | None:
+    """The period of a motion (N, n) in samples: the first peak of the angles' autocorrelation
+    (pooled over the moving joints) above PERIOD_ACF at which every moving joint's angle repeats
+    within REPEAT_TOL of its spread (the lag or a neighbour, the closest repeat), with at least
+    two periods in the record; None when the motion is not periodic."""
+    x = np.asarray(q, float)
+    x = x - x.mean(axis=0)
+    sd = x.std(axis=0)
+    mv = sd > 1e-6 * max(float(sd.max()), 1e-300)
+    if not np.any(mv):
+        return None
+    x, sd = x[:, mv] / sd[mv], sd[mv]
+    N = len(x)
+    F = np.fft.rfft(x, 2 * N, axis=0)
+    ac = np.fft.irfft(np.abs(F) ** 2, axis=0)[:N].sum(axis=1)
+    ac = ac / ac[0] * N / np.maximum(N - np.arange(N), 1)
+
+    def rep(k):
+        return float(np.max(np.sqrt(np.mean((x[k:] - x[:-k]) ** 2, axis=0))))
+
+    for k in range(2, N // 2 + 1):
+        if ac[k] >= PERIOD_ACF and ac[k] >= ac[k - 1] and ac[k] >= ac[min(k + 1, N - 1)]:
+            best = min((kk for kk in (k - 1, k, k + 1) if 1 <= kk <= N // 2), key=rep)
+            if rep(best) <= REPEAT_TOL:
+                return best
+    return None
+
+
+def periodic_noise(t, q, tau, m):
+    """Per-channel torque noise [N m] of a periodic record from the scatter between its periods:
+    with three periods or more the second difference across periods, ``tau(t + 2P) - 2 tau(t + P)
+    + tau(t)`` (variance 6 sigma^2; a drift linear in time cancels), else the first (2 sigma^2).
+    Returns ``(sigma, dof, info)`` or None when the motion is not periodic (:func:`find_period`)."""
+    k = find_period(q)
+    if k is None:
+        return None
+    tau = np.asarray(tau, float)
+    N = len(tau)
+    P = N // k
+    if P >= 3:
+        d, c, lags = tau[2 * k:] - 2 * tau[k:-k] + tau[:-2 * k], 6.0, (k, 2 * k)
+    else:
+        d, c, lags = tau[k:] - tau[:-k], 2.0, (k,)
+    sig = np.sqrt(np.mean(d**2, axis=0) / c)
+    dof = np.array([effective_samples(d[:, j], lags) if m[j] else 1.0 for j in range(tau.shape[1])])
+    h = float(np.mean(np.diff(t)))
+    return sig, dof, dict(period_s=k * h, periods=int(P), drift_cancelled=P >= 3)
+
+
+BLACK_BOX_BLOCKS = 32  # contiguous blocks, alternately held out (split-half cross-validation)
+BLACK_BOX_FEATURES = 200  # random Fourier features of the motion, at most
+
+
+def _ridge(A, Y, lam):
+    """Ridge coefficients (p, k) of ``Y`` (m, k) on ``A`` (m, p) for penalties ``lam`` (k,)."""
+    U, sv, Vt = np.linalg.svd(A, full_matrices=False)
+    UtY = U.T @ Y
+    return np.stack([Vt.T @ ((sv / (sv**2 + l_)) * UtY[:, j]) for j, l_ in enumerate(lam)], axis=1)
+
+
+def _ridge_blocks(A, Y, blk):
+    """Ridge regression coefficients (p, k) of ``Y`` (m, k) on ``A`` (m, p), each column's penalty
+    chosen on a log grid by two-fold cross-validation over the alternate blocks ``blk`` (m,) of
+    the training samples themselves: consecutive samples share their noise, so a penalty judged
+    sample by sample (leave-one-out, GCV) lets the black box chase the noise between blocks."""
+    s2max = np.linalg.norm(A, 2) ** 2
+    grid = s2max * np.geomspace(1e-8, 1.0, 17)
+    ids = np.unique(blk)
+    cv = np.zeros((len(grid), Y.shape[1]))
+    for f in (0, 1):
+        tr = np.isin(blk, ids[f::2])
+        te = ~tr
+        if not tr.any() or not te.any():
+            continue
+        U, sv, Vt = np.linalg.svd(A[tr], full_matrices=False)
+        UtY = U.T @ Y[tr]
+        for i, lam in enumerate(grid):
+            B = Vt.T @ ((sv / (sv**2 + lam))[:, None] * UtY)
+            cv[i] += np.sum((Y[te] - A[te] @ B) ** 2, axis=0)
+    return _ridge(A, Y, grid[np.argmin(cv, axis=0)])
+
+
+def black_box_noise(s, resid, m, seed: int = 0):
+    """Per-channel torque noise [N m] of a record that does not repeat: the held-out RMS of a
+    flexible black-box model of the nominal residual ``resid`` (N, n) [N m], fitted (ridge) on
+    alternate blocks of the record and tested on the others, both ways. The model is a smooth
+    function of the motion (random Fourier features of the angles' sines and cosines, rates and
+    accelerations; each joint's rate, acceleration and smoothed sign of the rate; the nominal
+    torque's time derivative): a structured model error (friction, inertia, a delay, a payload)
+    is a function of the motion and is predicted, noise is not. An upper bound of the noise (what
+    the model cannot represent stays in it). Returns ``(sigma, dof, info)``."""
+    N, n = resid.shape
+    q, qd, qdd = (np.asarray(v, float) for v in (s.q, s.qd, s.qdd))
+    h = float(np.mean(np.diff(s.t)))
+
+    def z(v):
+        sd = v.std(axis=0)
+        return (v - v.mean(axis=0)) / np.where(sd > 0, sd, 1.0)
+
+    v0 = 0.05 * np.maximum(qd.std(axis=0), 1e-12)
+    base = [np.ones((N, 1)), z(qd), z(qdd), np.tanh(qd / v0), np.sin(q), np.cos(q),
+            z(np.gradient(np.asarray(s.F0, float), h, axis=0))]
+    Z = np.concatenate([np.sin(q), np.cos(q), z(qd), z(qdd)], axis=1)
+    rng = np.random.default_rng(seed)
+    M = int(max(0, min(BLACK_BOX_FEATURES, N // 8 - sum(b.shape[1] for b in base))))
+    W = rng.standard_normal((Z.shape[1], M)) / np.sqrt(Z.shape[1])
+    Phi = np.concatenate(base + [np.cos(Z @ W + rng.uniform(0, 2 * np.pi, M))], axis=1)
+    sd = Phi.std(axis=0)
+    Phi = np.where(sd > 0, (Phi - Phi.mean(axis=0)) / np.where(sd > 0, sd, 1.0), 1.0)
+    ids = np.arange(N) * BLACK_BOX_BLOCKS // N
+    err = np.zeros_like(resid)
+    for f in (0, 1):
+        tr, te = ids % 2 == f, ids % 2 != f
+        B = _ridge_blocks(Phi[tr], resid[tr], ids[tr])
+        err[te] = resid[te] - Phi[te] @ B
+    sig = np.sqrt(np.mean(err**2, axis=0))
+    dof = np.array([effective_samples(err[:, j]) if m[j] else 1.0 for j in range(n)])
+    return sig, dof, dict(features=int(Phi.shape[1]), blocks=BLACK_BOX_BLOCKS)
 
 
 def frf_floor(a: dict, err) -> tuple[float, str]:

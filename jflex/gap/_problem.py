@@ -17,6 +17,7 @@ from ._frequency_inertia import refit_linear_inertia, shifted
 from ._noise import fits_to_noise
 from ._simulated import BASINS, polish_spring, scan_play, scan_spring
 from ._inertia import inertia_prior
+from . import _degenerate as D
 from . import _frequency_model as L
 from . import _response as R
 from . import _torque as T
@@ -108,6 +109,7 @@ class Problem:
                 raise ParameterError(f"EffectCandidate '{ec.name}': joint '{ec.joint}' is not a model joint {list(self.names)}")
             self.user[Candidate(ec.name, j)] = ec.bind(self.robot)
         self.nominal_effects = case.nominal_effects
+        self._screen_channels(case)
         # rotor inertia [kg m^2] the case states (nominal rotor_inertia with a value): the motor
         # side of a simulated spring when no torque training set fits it
         self.rotor_nominal = np.zeros(self.n)
@@ -115,6 +117,55 @@ class Problem:
             if e["effect"] == "rotor_inertia" and "value" in e:
                 for j, v in zip(e["joints"], e["value"]):
                     self.rotor_nominal[self.names.index(j)] = v
+
+    # --- data without signal, channels left out ------------------------------------------------
+    def _screen_channels(self, case: Case) -> None:
+        """Channels left out of the gap, and why (:attr:`excluded`, ``{set: {channel: reason}}``):
+        those the data layer found dead, stuck or flat (a data set's ``excluded_channels``) and those
+        without signal (:mod:`._degenerate`). A left-out training channel weighs nothing in the fits;
+        a left-out validation channel enters neither the gap nor the noise floor. A data set without
+        any signal is refused (:func:`._degenerate.refuse`)."""
+        self.excluded = {}
+        self.conditioning = {}
+        for d in case.datasets:
+            cond = getattr(d, "conditioning", None)
+            if cond:
+                self.conditioning[d.name] = cond
+            for ch in getattr(d, "excluded_channels", ()) or ():
+                self.excluded.setdefault(d.name, {})[str(ch)] = "left out by the data conditioning (dead, stuck or flat)"
+        refused = []
+        for train, sets in ((True, self.ttrain), (False, self.tval)):
+            for i, s in enumerate(sets):
+                raw = next(d for d in case.datasets if d.name == s.name).arrays["tau"]
+                bad, why = D.torque_channels(s.name, raw, s.F0, self.names)
+                drop = dict(self.excluded.get(s.name, {}))
+                for ch, r in bad.items():
+                    drop.setdefault(ch, r)
+                if why is None and len(drop) >= self.n:
+                    why = "every channel is left out (" + "; ".join(f"{c}: {r}" for c, r in drop.items()) + ")"
+                if why is not None:
+                    refused.append((s.name, why))
+                    continue
+                if drop:
+                    self.excluded[s.name] = drop
+                if drop and train:
+                    # weight zero in every fit (rows normalised by 1 / scale); the values are held
+                    # finite so that a non-finite reading cannot leak through a zero weight
+                    out = np.array([nm in drop for nm in self.names])
+                    sc = np.where(out, np.inf, s.scale)
+                    tau = np.where(out[None, :], 0.0, np.nan_to_num(s.tau, nan=0.0, posinf=0.0, neginf=0.0))
+                    sets[i] = dataclasses.replace(s, scale=sc, tau=tau, cache={})
+        for d in self.ftrain + self.fval:
+            if d.kind == "frf":
+                why = D.frf_set(d.arrays["H"])
+                if why is not None:
+                    refused.append((d.name, why))
+        D.refuse(refused)
+
+    def included(self, name: str) -> np.ndarray:
+        """(n,) bool: the torque channels of set ``name`` that enter the gap."""
+        out = self.excluded.get(name, {})
+        return np.array([nm not in out for nm in self.names])
 
     # --- nominal model -------------------------------------------------------------------------
     def nominal_state(self) -> State:
@@ -230,7 +281,7 @@ class Problem:
                     if eff not in nom:
                         out.append(Candidate(eff, None))
                     continue
-                for j in range(self.n):
+                for j in kind.joints(self.n):
                     if (eff, j) in self.nominal or (kind.subsumed_by, j) in self.nominal:
                         continue
                     out.append(Candidate(eff, j))
@@ -413,10 +464,12 @@ class Problem:
         for s in tsets:
             pred = T.predict(state.tfit, s)
             e = (pred - s.tau) / s.scale
-            ch = np.sqrt(np.mean(e**2, axis=0)) * 100
-            out[s.name] = dict(kind="torque", nrmse=float(np.sqrt(np.mean(e**2)) * 100),
-                               channels={self.names[j]: float(ch[j]) for j in range(self.n)},
-                               neff=e.size / 10.0, resid=e)
+            m = self.included(s.name) if sets == "validation" else np.isfinite(s.scale)
+            g, ch, w = pooled_gap(e, s.scale, m)
+            out[s.name] = dict(kind="torque", nrmse=g,
+                               channels={self.names[j]: float(ch[j]) for j in range(self.n) if m[j]},
+                               weights={self.names[j]: float(w[j]) for j in range(self.n) if m[j]},
+                               neff=e[:, m].size / 10.0, resid=e)
         for d in fsets:
             a = d.arrays
             if d.kind == "frf":
@@ -444,6 +497,20 @@ class Problem:
                 out[d.name] = dict(kind="modal", nrmse=float(tot), channels=ch, neff=float(len(ef)), ef=ef, ez=ez,
                                    idx=idx, f_model=f, z_model=z)
         return out
+
+
+def pooled_gap(e, scale, m) -> tuple[float, np.ndarray, np.ndarray]:
+    """A torque set's gap [%] from its residual ``e`` (N, n) in units of each joint's torque spread
+    ``scale`` (n,), over the channels ``m`` (n,) bool: ``(gap, per-joint NRMSE [%], weights)``.
+    The joints are pooled as residual energy over torque-signal energy,
+    ``sqrt(sum_j mse_j / sum_j scale_j^2)``: each joint's NRMSE^2 weighs by its share of the signal
+    energy, ``scale_j^2 / sum scale^2``, so that a near-idle joint, whose small spread makes any
+    error a large NRMSE, cannot outvote a loaded one; left-out channels weigh nothing."""
+    e, scale, m = np.asarray(e, float), np.asarray(scale, float), np.asarray(m, bool)
+    ch = np.sqrt(np.mean(e**2, axis=0)) * 100
+    w = np.where(m, np.where(np.isfinite(scale), scale, 0.0), 0.0) ** 2
+    w = w / w.sum() if w.sum() > 0 else w
+    return float(np.sqrt(np.sum(np.where(m, w * ch**2, 0.0)))), ch, w
 
 
 def parameters(pb: Problem, st: State) -> dict:

@@ -177,9 +177,16 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     L = [f"# Gap diagnosis{' of ' + robot if robot else ''}: {r['case']}", "",
          "The same report with its figures and the terms explained: [report.html](report.html).", ""]
     L.append(f"**Validation gap:** {r['gap_before']:.2f} % NRMSE before, {r['gap_after']:.2f} % after; noise floor "
-             f"{r['noise_floor']:.2f} %. Gap significant: **{r['significant']}**; the excess over noise closed: "
-             f"**{r['shrink']:.0f} %**; what remains is {'still' if r['remaining_significant'] else 'not'} significant.")
+             f"{r['noise_floor']:.2f} %. The nominal gap is **{_html.significance_words(r['significant'])}**; the excess "
+             f"over noise closed: **{r['shrink']:.0f} %**; what remains is {'still' if r['remaining_significant'] else 'not'} "
+             "significant.")
     L.append("")
+    fs = _html.floor_sentence(r)
+    if fs:
+        L += [fs, ""]
+    notes = _html.data_notes(r)
+    if notes:
+        L += ["## The data: channels left out and conditioning", ""] + [f"- {x}" for x in notes] + [""]
     verdict = r.get("verdict")
     if verdict:
         L.append(f"**Verdict: {verdict.replace('_', ' ')}.** {r.get('stop_reason', '')}.")
@@ -195,7 +202,7 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
         for m in moves:
             ch = "-" if m["mass_change_pct"] is None else f"{m['mass_change_pct']:+.1f}"
             L.append(f"| {m['link']} | {m['mass_cad_kg']:.3f} | {m['mass_kg']:.3f} | {ch} | {1e3 * m['com_shift_m']:.1f} | "
-                     f"{'yes' if m['at_tolerance_bound'] else 'no'} |")
+                     f"{_html.bound_words(m)} |")
         L.append("")
     if payload:
         L += [f"**{_html.payload_line(payload).capitalize()}.**", ""]
@@ -217,7 +224,7 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     if r["ambiguous"]:
         L += ["", "## Ambiguous", ""]
         for a in r["ambiguous"]:
-            L.append(f"- {a['effects'][0]} ({a['joints'][0]}) vs {a['effects'][1]} ({a['joints'][1]}): shrink "
+            L.append(f"- {_html.placed(a['effects'][0], a['joints'][0])} vs {_html.placed(a['effects'][1], a['joints'][1])}: shrink "
                      f"{a['shrink'][0]:.0f} % vs {a['shrink'][1]:.0f} %{' (a known confounded pair)' if a['known_pair'] else ''}; "
                      "more data sets or postures are needed to separate them.")
     L += ["", "## Candidate ranking (each added alone to the nominal model)", "",
@@ -227,6 +234,8 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
         sgt = "" if sg is None else "%s (%.2f)" % (sg["name"], sg["value"])
         L.append(f"| {i + 1} | {s['effect']} | {s['joint'] or s.get('link') or '-'} | {s['gap_after']:.2f} | {s['shrink']:.0f} | "
                  f"{s['score']:.1f} | {sgt} |")
+    if r.get("vetoed"):
+        L += ["", "Candidates never named: " + "; ".join(f"{v['candidate']} ({v['reason']})" for v in r["vetoed"][:10]) + "."]
     L += ["", "## Where the gap lies (validation data, largest first)", "",
           "| data set | channel | window [s] | band [Hz] | posture | NRMSE [%] |", "|---|---|---|---|---|---|"]
     for w in r["where"][:20]:
@@ -246,7 +255,10 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     L += ["", "## Gap as effects are added", "", "| step | validation gap [%] | excess over noise [%] |", "|---|---|---|"]
     for s in r["steps"]:
         L.append(f"| {s['added'] or 'nominal'} | {s['gap']:.2f} | {s['excess']:.2f} |")
-    L += ["", "## Fitted parameters of the final model", "", "```", _params(r["parameters"]), "```", ""]
+    L += ["", "## Fitted parameters of the final model", "", "```", _params(_without_payload(r["parameters"], payload)), "```", ""]
+    if payload:
+        # the payload once, as the summary gives it (mass, centre of mass in the tool frame, units)
+        L += [f"Payload: {_html.payload_line(payload)}.", ""]
     if r.get("responses_output_error"):
         L.append(f"Response data sets {r['responses_output_error']} were compared as output error: the model simulated "
                  "under their applied torques from rest at their q0 (the torque-side terms and the joint springs with "
@@ -273,6 +285,13 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     L += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
     L.append(f"\n_Diagnosis took {r['seconds']:.1f} s._")
     return "\n".join(L) + "\n"
+
+
+def _without_payload(params: dict, payload) -> dict:
+    if not payload:
+        return params
+    return {side: {k: v for k, v in grp.items() if k != "payload"} if isinstance(grp, dict) else grp
+            for side, grp in params.items()}
 
 
 def _params(p, ind=0):

@@ -26,8 +26,38 @@ def gap_summary(ev, floor):
     return gap, fl, exc
 
 
-def is_significant(ev, floor):
-    return any(ev[k]["nrmse"] > SIGNIFICANCE * floor[k] + MIN_GAP for k in ev)
+def is_significant(ev, floor, upper=None):
+    """Whether some validation set's gap exceeds its noise floor beyond the margin: ``SIGNIFICANCE``
+    x the floor, or the upper end of the floor's own confidence interval (``upper``, ``{set: %}``,
+    when the estimate is uncertain: few periods or effective samples) if that is larger, plus
+    ``MIN_GAP``."""
+    up = upper or {}
+    return any(ev[k]["nrmse"] > max(SIGNIFICANCE * floor[k], up.get(k) or 0.0) + MIN_GAP for k in ev)
+
+
+WORSE_MIN = 0.1  # [%] a channel's change below this is never "worse", whatever its floor
+
+
+def worse_channels(ev_new, ev_old, channel_floor=None) -> list:
+    """The torque channels (joints) that a model evaluated as ``ev_new`` predicts worse than the
+    model before it (``ev_old``) by more than their own noise: ``after > before + floor`` with
+    ``floor`` the channel's noise floor [%] (``channel_floor[set][channel]``, else the set's,
+    at least WORSE_MIN). An effect that helps the gap pooled over the joints but makes a joint
+    worse beyond its noise stands in for something else there: it is not accepted.
+    Returns ``[dict(dataset, channel, before, after, floor)]``."""
+    out = []
+    cf = channel_floor or {}
+    for k, r in ev_new.items():
+        if r.get("kind") != "torque" or k not in ev_old:
+            continue
+        for ch, after in r["channels"].items():
+            before = ev_old[k]["channels"].get(ch)
+            if before is None:
+                continue
+            fl = max(float(cf.get(k, {}).get(ch, 0.0)), WORSE_MIN)
+            if after > before + fl:
+                out.append(dict(dataset=k, channel=ch, before=float(before), after=float(after), floor=fl))
+    return out
 
 
 # held-out information-criterion gain (BIC form, :func:`ic_delta`) at which the validation data
@@ -40,8 +70,22 @@ DECISIVE_SCORE = 200.0
 
 def decisive(ranking) -> bool:
     """Whether a first-round candidate (ranking entries with ``score`` and ``shrink``) is decisive
-    evidence of a gap: score >= DECISIVE_SCORE and it closes at least MIN_NAMED_SHRINK % of it."""
-    return any(e["score"] >= DECISIVE_SCORE and e["shrink"] >= MIN_NAMED_SHRINK for e in ranking)
+    evidence of a gap: score >= DECISIVE_SCORE and it closes at least MIN_NAMED_SHRINK % of it
+    (entries vetoed, ``worse_channels`` or ``implausible`` set, are no evidence)."""
+    return any(e["score"] >= DECISIVE_SCORE and e["shrink"] >= MIN_NAMED_SHRINK and not vetoed(e) for e in ranking)
+
+
+def vetoed(entry) -> str | None:
+    """Why a ranking entry may not be named (None when it may): its fit is implausible (a value
+    no machine has, ``entry["implausible"]``), or it makes a joint worse beyond that joint's noise
+    (``entry["worse_channels"]``, :func:`worse_channels`)."""
+    if entry.get("implausible"):
+        return f"implausible fit: {entry['implausible']}"
+    w = entry.get("worse_channels")
+    if w:
+        return "makes " + ", ".join(f"{x['channel']} worse ({x['before']:.2f} -> {x['after']:.2f} %, floor "
+                                    f"{x['floor']:.2f} %)" for x in w)
+    return None
 
 
 def ic_delta(ev_new, ev_old, p_new):
@@ -109,11 +153,13 @@ class Selection:
     stop: str
     rejected: Step | None = None
     together: tuple | None = None  # a failed probation: (the candidates taken after the first, % of the excess all closed)
+    vetoed: list = dataclasses.field(default_factory=list)  # (round, candidate, why) never taken: see :func:`vetoed`
 
 
 def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
                    simpler=None, first=None, on_select=None, min_first_shrink=0.0,
-                   significant: bool | None = None, refine=None) -> Selection:
+                   significant: bool | None = None, refine=None, channel_floor: dict | None = None,
+                   upper: dict | None = None, implausible=None) -> Selection:
     """Forward selection on held-out data, the rules of :func:`diagnose`: each round refits every
     candidate not yet added on top of the current model, takes the one closing the most of the
     current excess gap (rounded to a point, so that noise-level differences tie; the information
@@ -142,9 +188,18 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
       e.g. also when a candidate is :func:`decisive` evidence.
     - ``refine(step) -> (state, ev)``: optional; the taken step's model refined (e.g. a costly
       identification done only for what was selected) before the next round builds on it.
+    - ``channel_floor``: ``{set: {channel: floor %}}``; a candidate that makes some joint worse by
+      more than that joint's floor (:func:`worse_channels`) is never taken.
+    - ``upper``: ``{set: %}``, the upper ends of the floors' confidence intervals
+      (:func:`is_significant`).
+    - ``implausible(cand, state) -> str | None``: optional; a candidate whose fit it calls
+      implausible is never taken.
+    Candidates passed over for either reason are listed in ``Selection.vetoed``.
     """
-    if not (is_significant(ev0, floor) if significant is None else significant):
-        return Selection([], state0, ev0, "not significant")
+    sig_ = lambda ev: is_significant(ev, floor, upper)
+    vetoes = []
+    if not (sig_(ev0) if significant is None else significant):
+        return _with(vetoes, Selection([], state0, ev0, "not significant"))
     steps, state, ev_cur, chosen = [], state0, ev0, []
     _, _, exc0 = gap_summary(ev0, floor)
     weak = None  # (first step, share it had to close) while a decisive but partial first effect is on probation
@@ -156,12 +211,12 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
         _, _, exc = gap_summary(ev_cur, floor)
         closed = 100 * (1 - exc / exc0)
         if closed >= weak[1]:
-            return Selection(steps, state, ev_cur, stop)
-        return Selection([], state0, ev0, "weak", weak[0], (tuple(st_.cand for st_ in steps[1:]), float(closed)))
+            return _with(vetoes, Selection(steps, state, ev_cur, stop))
+        return _with(vetoes, Selection([], state0, ev0, "weak", weak[0], (tuple(st_.cand for st_ in steps[1:]), float(closed))))
 
     while True:
         if len(steps) >= max_effects:
-            return on_probation("max effects") if weak else Selection(steps, state, ev_cur, "max effects")
+            return _with(vetoes, on_probation("max effects") if weak else Selection(steps, state, ev_cur, "max effects"))
         _, _, exc_cur = gap_summary(ev_cur, floor)
         pool = candidates(state, len(steps)) if callable(candidates) else candidates
         best = None
@@ -169,6 +224,11 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             if c in chosen:
                 continue
             st, ev = first[c] if (first is not None and not steps and c in first) else refit(state, c)
+            why = implausible(c, st) if implausible is not None else None
+            why = f"implausible fit: {why}" if why else vetoed(dict(worse_channels=worse_channels(ev, ev_cur, channel_floor)))
+            if why:
+                vetoes.append((len(steps), c, why))
+                continue
             score = -ic_delta(ev, ev_cur, n_params(c))
             _, _, exc = gap_summary(ev, floor)
             step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
@@ -181,16 +241,16 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             if best is None or key > best[0]:
                 best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink)))
         if best is None:
-            return on_probation("no candidate") if weak else Selection(steps, state, ev_cur, "no candidate")
+            return _with(vetoes, on_probation("no candidate") if weak else Selection(steps, state, ev_cur, "no candidate"))
         step = best[1]
         if weak and step.score < DECISIVE_SCORE:
-            return on_probation("too small")
+            return _with(vetoes, on_probation("too small"))
         if step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK:
-            return Selection(steps, state, ev_cur, "too small", step)
+            return _with(vetoes, Selection(steps, state, ev_cur, "too small", step))
         need = min_first_shrink(step) if callable(min_first_shrink) else min_first_shrink
         if not steps and step.step_shrink < need:
             if step.score < DECISIVE_SCORE:
-                return Selection(steps, state, ev_cur, "weak", step)
+                return _with(vetoes, Selection(steps, state, ev_cur, "weak", step))
             weak = (step, need)
         if refine is not None:
             st_r, ev_r = refine(step)
@@ -202,27 +262,36 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
         if weak:
             _, _, exc = gap_summary(ev_cur, floor)
             if 100 * (1 - exc / exc0) < weak[1]:
-                if not is_significant(ev_cur, floor):
-                    return on_probation("within noise")
+                if not sig_(ev_cur):
+                    return _with(vetoes, on_probation("within noise"))
                 continue
             weak, new = None, steps
         for st_ in new if on_select is not None else ():
             on_select(st_)
-        if not is_significant(ev_cur, floor):
-            return Selection(steps, state, ev_cur, "within noise")
+        if not sig_(ev_cur):
+            return _with(vetoes, Selection(steps, state, ev_cur, "within noise"))
+
+
+def _with(vetoes, sel: Selection) -> Selection:
+    sel.vetoed = list(vetoes)
+    return sel
 
 
 def step_record(added, ev, floor) -> dict:
     """The ``steps`` entry of a diagnosis: the gap after ``added`` (None: nominal)."""
     g, _, e = gap_summary(ev, floor)
-    return dict(added=added, gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()})
+    return dict(added=added, gap=g, excess=e, per_dataset={k: v["nrmse"] for k, v in ev.items()},
+                per_channel={k: dict(v["channels"]) for k, v in ev.items()})
 
 
-def verdict(significant: bool, remaining: bool, named: bool, shrink: float) -> str:
+def verdict(significant: bool, remaining: bool, named: bool, shrink: float, floor_known: bool = True) -> str:
     """``within_noise`` (no significant gap), ``explained`` (the named effects leave a gap within
     noise or close EXPLAINED_SHRINK % of the excess), ``partly_explained`` (an effect was named:
     it closed at least MIN_NAMED_SHRINK %, or supplied a measured mode the model lacked), else
-    ``unexplained``."""
+    ``unexplained``; ``floor_unknown`` when the noise floor could not be estimated
+    (``floor_known`` false: no gap can be judged against the noise)."""
+    if not floor_known:
+        return "floor_unknown"
     if not significant:
         return "within_noise"
     if named and (not remaining or shrink >= EXPLAINED_SHRINK):

@@ -14,14 +14,17 @@ if TYPE_CHECKING:
     from ._case import Case
     from ._problem import Problem
 
-def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 8, n_bands: int = 8) -> list:
-    """Localise the validation gap: data set x channel, time windows, frequency bands, postures."""
+def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 8, n_bands: int = 8,
+          channel_floor: dict | None = None) -> list:
+    """Localise the validation gap: data set x channel, time windows, frequency bands, postures.
+    Channels left out of the gap (:attr:`Problem.excluded`) are not listed; ``channel_floor``
+    (``{set: {channel: floor %}}``) gives each channel its own noise floor."""
     out = []
     by_name = {d.name: d for d in case.datasets}
     for name, r in ev.items():
         d = by_name[name]
         for ch, v in r["channels"].items():
-            item = dict(dataset=name, channel=ch, nrmse=v, floor=floor[name])
+            item = dict(dataset=name, channel=ch, nrmse=v, floor=_channel_floor(floor, channel_floor, name, ch))
             if r["kind"] != "torque" and "q0" in d.arrays:
                 item["posture"] = _posture_dict(problem, d)
             if r["kind"] == "modal":
@@ -36,9 +39,12 @@ def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 
             e = r["resid"]
             edges = np.linspace(0, len(s.t), n_windows + 1).astype(int)
             for j, cn in enumerate(chans):
+                if cn not in r["channels"]:
+                    continue  # left out of the gap (no signal, or excluded by the data conditioning)
+                fl = _channel_floor(floor, channel_floor, name, cn)
                 for a, b in zip(edges[:-1], edges[1:]):
                     out.append(dict(dataset=name, channel=cn, window_s=[float(s.t[a]), float(s.t[b - 1])],
-                                    nrmse=float(np.sqrt(np.mean(e[a:b, j] ** 2)) * 100), floor=floor[name]))
+                                    nrmse=float(np.sqrt(np.mean(e[a:b, j] ** 2)) * 100), floor=fl))
                 # residual spectrum: the band holding most of the residual's energy
                 fs = 1.0 / np.mean(np.diff(s.t))
                 spec = np.abs(np.fft.rfft(e[:, j])) ** 2
@@ -48,7 +54,7 @@ def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 
                     m = (fr >= lo) & (fr < hi)
                     val = float(np.sqrt(spec[m].sum() / max(spec.sum(), 1e-300)) * r["channels"][cn]) if m.any() else 0.0
                     out.append(dict(dataset=name, channel=cn, band_hz=[float(lo), float(hi)], nrmse=val,
-                                    floor=floor[name]))
+                                    floor=fl))
         if r["kind"] == "frf":
             a = d.arrays
             ok = L.frf_entries(a["H"])
@@ -63,6 +69,12 @@ def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 
     out += posture_correlation(problem, ev, case)
     out.sort(key=lambda w: -w["nrmse"])
     return out
+
+
+def _channel_floor(floor, channel_floor, name, ch):
+    """The noise floor [%] of one channel: its own when the floor gives channels (``floor`` may
+    carry ``floor["_channels"][name][ch]``), else its data set's."""
+    return float(floor.get("_channels", {}).get(name, {}).get(ch, floor[name]))
 
 
 def _posture_dict(problem, d):
@@ -86,6 +98,8 @@ def posture_correlation(problem, ev, case) -> list:
         vars_ = {problem.names[j]: s.q[:, j] for j in range(problem.n)}
         vars_.update({nm: s.q_extra[:, i] for i, nm in enumerate(s.extra_joints)})
         for j in range(problem.n):
+            if problem.names[j] not in r["channels"]:
+                continue
             for vn, v in vars_.items():
                 if np.std(v) < 1e-9:
                     continue

@@ -1,0 +1,134 @@
+"""The gap's noise floor and its weighting, on records made by independent code (Pinocchio's
+inverse dynamics along the independent bench's Fourier trajectories, NumPy noise of a known
+level): the floor of a periodic record from the scatter between its periods, of a record that
+does not repeat from a black-box model's held-out error; the joints pooled by their share of
+the torque signal; an effect that makes a joint worse beyond its noise is not taken."""
+
+import pathlib
+import sys
+import types
+
+import numpy as np
+import pytest
+
+from jflex.gap import find_period, forward_select, worse_channels
+from jflex.gap._noise import black_box_noise, periodic_noise
+from jflex.gap._problem import pooled_gap
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
+from independent import robots as R  # noqa: E402
+from independent import signals as S  # noqa: E402
+from independent import torque as TQ  # noqa: E402
+
+FS = 250.0
+
+
+def _motion(T, periods, seed=0):
+    """A Fourier excitation of period ``T`` [s] repeated ``periods`` times on the independent bench's
+    3-joint arm: t, q, qd, qdd and the true robot's torques (Pinocchio)."""
+    rng = np.random.default_rng(seed)
+    model, _, home = R.true_model("arm3")
+    tr = S.Fourier(rng, home, np.full(model.nq, 0.5), f0=1.0 / T)
+    t = np.arange(int(round(periods * T * FS))) / FS
+    q, qd, qdd = tr(t), tr(t, 1), tr(t, 2)
+    return t, q, qd, qdd, TQ.rnea_batch(model, q, qd, qdd)
+
+
+@pytest.mark.parametrize("coloured", [False, True])
+def test_periodic_floor_is_the_added_noise_within_20_percent(coloured):
+    t, q, qd, qdd, tau = _motion(2.0, 5)
+    rng = np.random.default_rng(1)
+    std = np.array([0.02, 0.01, 0.005]) * tau.std(axis=0) * 10
+    noise = (S.ar1_noise(rng, tau.shape, 0.8, std) if coloured else rng.normal(size=tau.shape) * std)
+    # the friction of a real joint repeats with the motion: part of the torque, not of the noise
+    meas = tau + 0.3 * np.tanh(qd / 0.01) + 0.2 * qd + noise
+    got = periodic_noise(t, S.quantise(q, 2 * np.pi / 2**19), meas, np.ones(3, bool))
+    assert got is not None
+    sig, dof, info = got
+    assert info["periods"] == 5 and info["period_s"] == pytest.approx(2.0, abs=1 / FS)
+    np.testing.assert_allclose(sig, noise.std(axis=0), rtol=0.2)
+    assert np.all(dof > 50)
+
+
+def test_periodic_floor_cancels_a_slow_drift():
+    # a viscous friction that grows 30 % over the record: period-to-period second differences
+    # cancel its linear part, the floor stays the noise (a drift is model error, not noise)
+    t, q, qd, qdd, tau = _motion(2.0, 6, seed=2)
+    rng = np.random.default_rng(3)
+    std = 0.01 * tau.std(axis=0)
+    Fv = 0.2 * tau.std(axis=0) / qd.std(axis=0)
+    drift = Fv * qd * (1 + 0.3 * t[:, None] / t[-1])
+    noise = rng.normal(size=tau.shape) * std
+    sig, _, info = periodic_noise(t, q, tau + drift + noise, np.ones(3, bool))
+    assert info["drift_cancelled"]
+    np.testing.assert_allclose(sig, noise.std(axis=0), rtol=0.2)
+
+
+def test_no_period_in_a_single_period_or_a_non_repeating_motion():
+    t, q, *_ = _motion(3.0, 1)
+    assert find_period(q) is None
+    rng = np.random.default_rng(4)
+    walk = np.cumsum(rng.normal(size=(1000, 3)), axis=0) * 0.01
+    assert find_period(walk) is None
+    t, q, *_ = _motion(1.0, 3)
+    assert find_period(q) == int(round(1.0 * FS))
+
+
+def test_black_box_floor_does_not_count_structured_error_as_noise():
+    # a record that does not repeat (two incommensurate periods); its nominal residual holds
+    # Coulomb and viscous friction and a sensor delay (functions of the motion) plus coloured noise
+    t, q, qd, qdd, tau = _motion(3.0, 1, seed=5)
+    _, q2, qd2, qdd2, tau2 = _motion(2.3, 1.3, seed=6)
+    k = min(len(t), len(q2))
+    t, q, qd, qdd, tau = t[:k], q[:k] + 0.3 * q2[:k], qd[:k] + 0.3 * qd2[:k], qdd[:k] + 0.3 * qdd2[:k], tau[:k]
+    model, _, _ = R.true_model("arm3")
+    F0 = TQ.rnea_batch(model, q, qd, qdd)
+    rng = np.random.default_rng(7)
+    std = 0.01 * F0.std(axis=0)
+    noise = S.ar1_noise(rng, F0.shape, 0.7, std)
+    structured = 0.05 * F0.std(axis=0) * np.tanh(qd / 0.02) + 0.05 * F0.std(axis=0) * qd / qd.std(axis=0)
+    structured = structured + 0.004 * np.gradient(F0, t, axis=0)
+    s = types.SimpleNamespace(t=t, q=q, qd=qd, qdd=qdd, F0=F0)
+    sig, dof, _ = black_box_noise(s, structured + noise, np.ones(3, bool))
+    true = noise.std(axis=0)
+    assert np.all(sig >= 0.8 * true)  # an upper bound of the noise, up to its sampling error
+    # far below the structured error it was given: that is a model's to close, not noise
+    assert np.all(sig < 0.5 * np.sqrt(np.mean((structured + noise) ** 2, axis=0)))
+    assert np.all(sig < 2.0 * true)
+
+
+def test_a_near_idle_joint_cannot_decide_the_pooled_gap():
+    # a loaded joint (16.7 N m of torque spread, 0.3 N m error) and a near-idle one (0.28 N m,
+    # 0.2 N m error: 71 % of its own spread): pooled, the gap is the signal-energy share
+    rng = np.random.default_rng(8)
+    spread = np.array([16.7, 0.28])
+    err = rng.normal(size=(4000, 2)) * np.array([0.3, 0.2])
+    g, ch, w = pooled_gap(err / spread, spread, np.ones(2, bool))
+    own = np.sqrt(np.mean(err**2, axis=0)) / spread * 100
+    np.testing.assert_allclose(ch, own)
+    expect = np.sqrt(np.sum(np.mean(err**2, axis=0)) / np.sum(spread**2)) * 100
+    assert g == pytest.approx(expect)
+    assert g < 2.5 < np.mean(own)  # the unweighted mean (36 %) would be the idle joint's
+    np.testing.assert_allclose(w, spread**2 / np.sum(spread**2))
+    # a left-out channel enters neither
+    g1, _, w1 = pooled_gap(err / spread, spread, np.array([True, False]))
+    assert g1 == pytest.approx(own[0]) and w1[1] == 0.0
+
+
+def test_an_effect_that_makes_a_joint_worse_is_not_taken():
+    # a delay closes most of the pooled gap but makes joint 2 worse by far more than its floor
+    ev0 = {"v": {"kind": "torque", "nrmse": 10.0, "neff": 1000.0, "channels": {"j1": 10.0, "j2": 3.0}}}
+    after = {"delay": {"v": {"kind": "torque", "nrmse": 2.0, "neff": 1000.0, "channels": {"j1": 1.5, "j2": 6.0}}},
+             "offset": {"v": {"kind": "torque", "nrmse": 4.0, "neff": 1000.0, "channels": {"j1": 4.0, "j2": 3.05}}}}
+    floor, cfloor = {"v": 1.0}, {"v": {"j1": 1.0, "j2": 0.5}}
+    assert [w["channel"] for w in worse_channels(after["delay"], ev0, cfloor)] == ["j2"]
+    assert worse_channels(after["offset"], ev0, cfloor) == []  # within its floor: not worse
+    sel = forward_select((), ev0, floor, ["delay", "offset"], lambda st, c: (st + (c,), after[c]),
+                         n_params=lambda c: 1, max_effects=1, channel_floor=cfloor)
+    assert [st.cand for st in sel.steps] == ["offset"]
+    assert [(c, "j2" in why) for _, c, why in sel.vetoed] == [("delay", True)]
+    # an implausible fit is never taken either
+    sel = forward_select((), ev0, floor, ["delay", "offset"], lambda st, c: (st + (c,), after[c]),
+                         n_params=lambda c: 1, max_effects=1, channel_floor=cfloor,
+                         implausible=lambda c, st: "play 0.144 rad" if c == "offset" else None)
+    assert sel.steps == [] and {c for _, c, _ in sel.vetoed} == {"delay", "offset"}
