@@ -137,3 +137,90 @@ def test_batched_kernels_match_pinocchio(fuse):
         if name == "crba":
             R = np.triu(R) + np.swapaxes(np.triu(R, 1), 1, 2)
         np.testing.assert_allclose(out, R, rtol=1e-9, atol=1e-9 * np.abs(R).max(), err_msg=f"{name}, fuse={fuse}")
+
+
+def _fd(f, x, h=1e-6):
+    """Central differences of f at x, column per coordinate."""
+    cols = []
+    for k in range(len(x)):
+        e = np.zeros(len(x))
+        e[k] = h
+        cols.append((np.asarray(f(x + e)) - np.asarray(f(x - e))) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
+def test_coupled_panda_matches_pinocchio():
+    # the Panda as it ships: finger 2 mimics finger 1, one coordinate for both (Pinocchio's
+    # mimic=True); where Pinocchio has no mimic support (regressor, energies, derivatives, ABA) the
+    # reference is its independent model at q_full = G q (multiplier 1, offset 0), or differences
+    if "panda" not in jflex.available_robots():
+        pytest.skip("example-robot-data not installed")
+    from jflex._config import _example_robot_urdf
+
+    path = str(_example_robot_urdf("panda"))
+    robot = jflex.load_urdf(path)
+    model, full = pin.buildModelFromUrdf(path, mimic=True), pin.buildModelFromUrdf(path)
+    data, fdata = model.createData(), full.createData()
+    n = robot.nq
+    assert n == model.nv == 8 and robot.n_joints == full.nv == 9
+    G = np.vstack([np.eye(8), np.eye(8)[7]])
+    rng = np.random.default_rng(5)
+    q = rng.uniform(np.asarray(robot.lower)[:8], np.asarray(robot.upper)[:8])
+    qd, qdd = rng.normal(size=n), rng.normal(size=n)
+    fext = rng.normal(size=(9, 6))  # one wrench per body of the tree
+    tau = pin.rnea(model, data, q, qd, qdd)
+    close(jflex.rnea(robot, q, qd, qdd), tau)
+    pin_f = [pin.Force.Zero()] + [pin.Force(f[:3], f[3:]) for f in fext]
+    close(jflex.rnea(robot, q, qd, qdd, f_ext=fext), G.T @ pin.rnea(full, fdata, G @ q, G @ qd, G @ qdd, pin_f))
+    with pytest.raises(jflex.DataError, match=r"f_ext must have shape \(9, 6\)"):
+        jflex.rnea(robot, q, qd, qdd, f_ext=fext[:8])
+    with pytest.raises(jflex.ShapeError, match=r"q must have shape \(8,\)"):
+        jflex.rnea(robot, G @ q, G @ qd, G @ qdd)
+    M = _sym(pin.crba(model, data, q))
+    close(jflex.crba(robot, q), M)
+    close(jflex.nonlinear_effects(robot, q, qd), pin.nonLinearEffects(model, data, q, qd))
+    close(jflex.gravity(robot, q), pin.computeGeneralizedGravity(model, data, q))
+    for method in ("aba", "crba"):
+        close(jflex.forward_dynamics(robot, q, qd, tau, method=method), qdd)
+    close(jflex.aba(robot, q, qd, tau), qdd)
+    tau_f = np.asarray(jflex.rnea(robot, q, qd, qdd, f_ext=fext))
+    close(jflex.aba(robot, q, qd, tau_f, f_ext=fext), qdd)
+    Y = np.asarray(jflex.regressor(robot, q, qd, qdd))
+    close(Y, G.T @ pin.computeJointTorqueRegressor(full, fdata, G @ q, G @ qd, G @ qdd))
+    close(Y @ np.asarray(robot.inertia).ravel(), tau)
+    close(jflex.kinetic_energy(robot, q, qd), pin.computeKineticEnergy(full, fdata, G @ q, G @ qd))
+    close(jflex.potential_energy(robot, q), pin.computePotentialEnergy(full, fdata, G @ q))
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    T = jflex.forward_kinematics(robot, q)
+    for i in range(9):
+        close(T[i], data.oMi[i + 1].homogeneous)
+    pin.computeJointJacobians(model, data, q)
+    for i in (6, 7, 8):
+        for ref, pref in [("local", pin.LOCAL), ("world", pin.WORLD), ("local_world_aligned", pin.LOCAL_WORLD_ALIGNED)]:
+            close(jflex.jacobian(robot, q, i, reference=ref), pin.getJointJacobian(model, data, i + 1, pref))
+    fid = model.getFrameId("panda_rightfinger")
+    close(jflex.frame_placement(robot, q, "panda_rightfinger"), data.oMf[fid].homogeneous)
+    close(jflex.jacobian(robot, q, "panda_rightfinger"), pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED))
+    # derivatives against central differences of Pinocchio's coupled rnea and of M^-1 (tau - h)
+    dq, dv, dM = jflex.rnea_derivatives(robot, q, qd, qdd)
+    close(dq, _fd(lambda x: pin.rnea(model, data, x, qd, qdd), q), rtol=1e-6)
+    close(dv, _fd(lambda x: pin.rnea(model, data, q, x, qdd), qd), rtol=1e-6)
+    close(dM, M)
+
+    def fwd(x, v, t):
+        return np.linalg.solve(_sym(pin.crba(model, data, x)), t - pin.nonLinearEffects(model, data, x, v))
+
+    aq, av, at = jflex.aba_derivatives(robot, q, qd, tau)
+    close(aq, _fd(lambda x: fwd(x, qd, tau), q), rtol=1e-6)
+    close(av, _fd(lambda x: fwd(q, x, tau), qd), rtol=1e-6)
+    close(at, np.linalg.inv(M), rtol=1e-8)
+
+
+def test_forward_dynamics_method_is_named():
+    robot = jflex.from_dh([[0.0, 0.0, 1.0, 0.0]], inertias=[[1.0, 0.5, 0, 0, 0.1, 0, 0.4, 0, 0, 0.4]])
+    z = np.zeros(1)
+    with pytest.raises(jflex.JFlexError, match=r"forward_dynamics: method must be 'aba' or 'crba', got 'foo'"):
+        jflex.forward_dynamics(robot, z, z, z, method="foo")
+    with pytest.raises(jflex.JFlexError, match=r"jacobian: reference must be one of"):
+        jflex.jacobian(robot, z, 0, reference="base")

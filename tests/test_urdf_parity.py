@@ -103,11 +103,15 @@ def _sym(M):
 
 
 def coupling(path, names):
+    return coupling_from_text(pathlib.Path(path).read_text(), names)
+
+
+def coupling_from_text(text, names):
     """``(G, b)`` with Pinocchio's joint values ``G q + b`` for jflex's coordinates ``q``, read from
     the URDF's <mimic> tags (chains composed), for ``names`` the joints of the tree: the reference
     for the files whose mimic joints Pinocchio cannot couple (a leader met after its follower)."""
     spec = {}
-    for j in ET.parse(path).getroot().findall("joint"):
+    for j in ET.fromstring(text).findall("joint"):
         m = j.find("mimic")
         if m is not None and j.get("name") in names:
             spec[j.get("name")] = (m.get("joint"), float(m.get("multiplier", 1)), float(m.get("offset", 0)))
@@ -364,6 +368,84 @@ def test_mimic_of_a_missing_joint_is_named():
     assert r.joint_names == ("j0",)
     c, s = np.cos(0.7), np.sin(0.7)
     close(np.asarray(jflex.frame_placement(r, np.zeros(1), "b"))[:3, :3], [[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _link(name, m, xyz):
+    return (f'<link name="{name}"><inertial><origin xyz="{xyz}" rpy="0.1 0.2 0.3"/><mass value="{m}"/>'
+            '<inertia ixx="0.02" ixy="0.001" ixz="0" iyy="0.03" iyz="0.002" izz="0.025"/></inertial></link>')
+
+
+def _joint(name, typ, parent, child, axis, xyz, mimic=""):
+    return (f'<joint name="{name}" type="{typ}"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="{xyz}" rpy="0.3 -0.2 0.1"/><axis xyz="{axis}"/>'
+            f'<limit lower="-2" upper="2" effort="10" velocity="2"/>{mimic}</joint>')
+
+
+def _coupled_urdf(j4_mimic=""):
+    """j2 (revolute) and j3 (prismatic) follow j1 with multipliers and offsets; j4 is independent or
+    (``j4_mimic``) follows j2 in turn."""
+    return ('<robot name="coupled"><link name="base"/>' + _link("l1", 1.0, "0.1 0 0") + _link("l2", 0.7, "0 0.1 0")
+            + _link("l3", 0.5, "0 0 0.1") + _link("l4", 0.3, "0.05 0.05 0")
+            + _joint("j1", "revolute", "base", "l1", "0 0 1", "0 0 0.2")
+            + _joint("j2", "revolute", "l1", "l2", "0 1 0", "0.3 0 0", '<mimic joint="j1" multiplier="2" offset="0.1"/>')
+            + _joint("j3", "prismatic", "l2", "l3", "1 0 0", "0.2 0.1 0", '<mimic joint="j1" multiplier="-0.05" offset="0.02"/>')
+            + _joint("j4", "revolute", "l3", "l4", "0 0.6 0.8", "0 0 0.2", j4_mimic)
+            + "</robot>")
+
+
+def test_mimic_multiplier_offset_and_chain_match_pinocchio():
+    import jax
+
+    text = _coupled_urdf()
+    robot = jflex.from_urdf_string(text)
+    assert robot.coordinate_names == ("j1", "j4") and robot.joint_names == ("j1", "j2", "j3", "j4")
+    compare(robot, pin.buildModelFromXML(text, mimic=True), np.random.default_rng(6))
+    # a chain (j4 follows j2, which follows j1): composed, against the independent model at G q + b
+    chain = _coupled_urdf('<mimic joint="j2" multiplier="-1.5" offset="0.3"/>')
+    robot2 = jflex.from_urdf_string(chain)
+    assert robot2.coordinate_names == ("j1",)
+    G, b, _ = coupling_from_text(chain, robot2.joint_names)
+    np.testing.assert_allclose(G[:, 0], [1.0, 2.0, -0.05, -3.0])
+    np.testing.assert_allclose(b, [0.0, 0.1, 0.02, -1.5 * 0.1 + 0.3])
+    compare(robot2, pin.buildModelFromXML(chain), np.random.default_rng(7), G=G, b=b)
+    # compiled with the robot traced (multipliers and offsets are leaves), batched, differentiated
+    rng = np.random.default_rng(8)
+    q, v, a = rng.normal(size=(3, 4, 2))
+    eager = np.stack([np.asarray(jflex.rnea(robot, *x)) for x in zip(q, v, a)])
+    close(jax.jit(jax.vmap(jflex.rnea, (None, 0, 0, 0)))(robot, q, v, a), eager)
+    f = lambda k: jflex.rnea(robot.replace(mimic_multiplier=robot.mimic_multiplier.at[1].set(k)), q[0], v[0], a[0])
+    h = 1e-6
+    close(jax.jacfwd(f)(2.0), (np.asarray(f(2.0 + h)) - np.asarray(f(2.0 - h))) / (2 * h), rtol=1e-6)
+    cycle = _coupled_urdf('<mimic joint="j2" multiplier="1" offset="0"/>').replace('<mimic joint="j1" multiplier="2"', '<mimic joint="j4" multiplier="2"')
+    with pytest.raises(jflex.URDFError, match="mimic each other in a cycle"):
+        jflex.from_urdf_string(cycle)
+
+
+def test_long_chain_loads_without_recursion():
+    # 990 joints once exhausted Python's recursion limit in the tree walk (RecursionError).
+    # Pinocchio's own URDF parser is no reference here (it ran out of memory on this file): the tip's
+    # placement is checked against the product of the URDF's transforms.
+    from scipy.spatial.transform import Rotation
+
+    n = 990
+    axes = ["0 0 1", "0 1 0", "1 0 0"]
+    parts = ['<robot name="chain"><link name="l0"/>']
+    for i in range(1, n + 1):
+        parts.append(f'<link name="l{i}">' + _inertial(0.1, 1e-4, 1e-4, 1e-4, "0.05 0 0") + "</link>")
+        parts.append(f'<joint name="j{i}" type="revolute"><parent link="l{i - 1}"/><child link="l{i}"/>'
+                     f'<origin xyz="0.1 0 0" rpy="0 0 0.01"/><axis xyz="{axes[i % 3]}"/>'
+                     '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>')
+    robot = jflex.from_urdf_string("".join(parts) + "</robot>")
+    assert robot.nq == n and robot.parents == tuple(range(-1, n - 1))
+    q = np.random.default_rng(9).uniform(-0.1, 0.1, n)
+    ref = np.eye(4)
+    step = np.eye(4)
+    step[:3, :3], step[:3, 3] = Rotation.from_euler("xyz", [0, 0, 0.01]).as_matrix(), [0.1, 0, 0]
+    for i in range(1, n + 1):
+        turn = np.eye(4)
+        turn[:3, :3] = Rotation.from_rotvec(np.array(axes[i % 3].split(), float) * q[i - 1]).as_matrix()
+        ref = ref @ step @ turn
+    close(jflex.frame_placement(robot, q, f"l{n}"), ref)
 
 
 # ---- inertias, floating bases, duplicates -----------------------------------------------------
