@@ -19,8 +19,10 @@ reuses), plus what each trait asks of the diagnosis:
   flagged channels that holds the joint's name);
 - the jittered log: the same selection and verdict as its uniform twin.
 
-``--write-results`` puts the summary line between the ``reallog-family`` markers of
-``benchmarks/bench_gap_results.md``.
+``--case-format`` (default ``auto``: ``extended`` when the installed jflex's case schema has
+current offsets and coupling matrices, else ``current``) is how the currents and jitter cases
+write case.yaml. ``--write-results`` puts the summary line between the ``reallog-family`` markers
+of ``benchmarks/bench_gap_results.md``.
 """
 
 from __future__ import annotations
@@ -44,6 +46,22 @@ from independent.reallog import make_reallog_case, plan  # noqa: E402
 RESULTS_MD = HERE / "bench_gap_results.md"
 MARK = ("<!-- reallog-family:begin (written by benchmarks/bench_gap_reallog.py --size full --write-results) -->",
         "<!-- reallog-family:end -->")
+
+
+def case_format(choice: str, jflex_src: str | None = None) -> str:
+    """``current`` or ``extended`` (``auto``: what the jflex that will diagnose accepts)."""
+    if choice != "auto":
+        return choice
+    import subprocess
+
+    code = ("from jflex.gap import _schema; f = _schema.Dataset.model_fields; "
+            "print('extended' if 'coupling' in f and 'offset' in f else 'current')")
+    env = None
+    if jflex_src:
+        import os
+        env = dict(os.environ, PYTHONPATH=str(pathlib.Path(jflex_src).resolve()) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "current"
 
 
 def _dead_named(res: dict, joint: str) -> bool:
@@ -189,11 +207,15 @@ def main(argv=None):
     p.add_argument("--in-process", action="store_true", help="diagnose in this process (no time limit)")
     p.add_argument("--jflex-src", default=None, help="a jflex source tree to import instead of the installed one")
     p.add_argument("--write-results", action="store_true", help="write the summary line into bench_gap_results.md")
+    p.add_argument("--case-format", choices=("auto", "current", "extended"), default="auto",
+                   help="case.yaml of the currents and jitter cases (auto: what the jflex run accepts)")
     a = p.parse_args(argv)
     root = pathlib.Path(a.out or f"runs/gap-reallog-{a.size}")
     for sub in ("cases", "diagnoses", "results"):
         (root / sub).mkdir(parents=True, exist_ok=True)
-    specs = plan(a.size)
+    fmt = case_format(a.case_format, a.jflex_src)
+    print(f"case format: {fmt}", flush=True)
+    specs = [dict(s, fmt=fmt) for s in plan(a.size)]
     if a.only:
         specs = [s for s in specs if fnmatch.fnmatch(s["id"], a.only) or a.only in s["id"]]
     rows = []
@@ -205,7 +227,7 @@ def main(argv=None):
             stamp = folder / "spec.json"
             if not (stamp.is_file() and json.loads(stamp.read_text()) == spec):
                 t0 = time.perf_counter()
-                make_reallog_case(folder, spec["trait"], spec["seed"], spec["small"], spec["robot"])
+                make_reallog_case(folder, spec["trait"], spec["seed"], spec["small"], spec["robot"], spec["fmt"])
                 stamp.write_text(json.dumps(spec))
                 print(f"[{i + 1}/{len(specs)}] {cid}: generated in {time.perf_counter() - t0:.1f} s", flush=True)
             truth = json.loads((folder / "truth.json").read_text())

@@ -96,8 +96,9 @@ def test_jitter_statistics(tmp_path):
         dt = np.diff(a[:, 0]) * fs
         rep = dt == 0
         assert 0.002 < rep.mean() < 0.03  # about 1 % repeated rows
-        k = a[1:][rep]
-        np.testing.assert_array_equal(k, a[:-1][rep])  # a repeated row repeats every value
+        np.testing.assert_array_equal(a[1:][rep], a[:-1][rep])  # a repeated row repeats every value
+        stale = np.all(a[1:, 1:] == a[:-1, 1:], axis=1) & ~rep  # the previous values at a new stamp
+        assert 0.002 < stale.mean() < 0.03
         kept = dt[(dt > 0) & (dt < 1.5)]
         dev = np.abs(kept - 1)
         assert 0.15 < dev.max() <= RL.JITTER + 1e-9  # steps vary by up to 20 %
@@ -184,7 +185,7 @@ def _marks(t):
 
 @pytest.mark.parametrize("trait", [_marks(t) for t in RL.TRAITS])
 def test_every_case_loads(tmp_path, trait):
-    folder, truth = RL.make_reallog_case(tmp_path / trait, trait, seed=11)
+    folder, truth = RL.make_reallog_case(tmp_path / trait, trait, seed=11, fmt="extended" if _extended_format() else "current")
     case = jflex.gap.load_case(folder)
     assert {d.split for d in case.datasets} == {"train", "validation"}
     assert "truth" not in (folder / "case.yaml").read_text()

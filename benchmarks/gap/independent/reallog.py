@@ -16,7 +16,8 @@ family's cases. The traits:
 ``coupled_wrist``     as ``currents``, the last two joints driven by two motors through a coupling
                       matrix ``K``: ``tau = K^T k (i - i0)``
 ``forgotten_scale``   a currents log whose case.yaml forgets the current-to-torque scale
-``jitter``            CSV stamps jittering by 20 % of the step, dropped samples, repeated rows
+``jitter``            CSV stamps jittering by 20 % of the step, dropped samples, repeated rows (same
+                      stamp) and stale rows (the previous values at a new stamp)
 ``jitter_twin``       the same robot, effect and motion sampled uniformly (the diagnosis of
                       ``jitter`` should be this one's)
 ``dead_zero``         one joint's torque channel reads exact zeros 85 % of the time
@@ -48,8 +49,9 @@ TRAITS = ("closed_loop", "currents", "coupled_wrist", "forgotten_scale", "jitter
           "dead_stuck", "drifting_friction", "multirate", "periodic", "null_cad_ar1", "cogging")
 JITTER = 0.2          # steps vary by up to +-20 % of the nominal step
 DROP_FRACTION = 0.02  # samples dropped one by one, besides one burst
-DROP_BURST = 4        # consecutive samples lost once per record
+DROP_BURST = 3        # consecutive samples lost once per record (a step of ~4.2 x the nominal one, as on a real 1 kHz log)
 REPEAT_FRACTION = 0.01  # rows logged twice (same stamp, same values)
+STALE_FRACTION = 0.01   # rows that repeat the previous row's values at their own stamp (a stale reading)
 DEAD_FRACTION = 0.85  # share of exact zeros on a dead channel
 STUCK_VALUE = 0.013   # [N m] a stuck channel's constant reading
 DRIFT = 0.30          # viscous friction grows by this fraction over the session
@@ -423,9 +425,13 @@ def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False, fmt=None):
         qm = S.quantise(q, ENCODER_STEP)
         qdm = qd + nrng.normal(0, 1e-3, qd.shape)
         if rows is not None:
+            stale = np.flatnonzero(srng.random(t.size) < STALE_FRACTION)
+            stale = stale[stale > 0]
+            for k in stale:  # in order: a run of stale rows holds the last fresh reading
+                qm[k], qdm[k], tau[k] = qm[k - 1], qdm[k - 1], tau[k - 1]
             t, qm, qdm, tau = t[rows], qm[rows], qdm[rows], tau[rows]
             dt = np.diff(t)
-            stats.append(dict(rows=int(t.size), repeated_rows=int(np.sum(dt == 0)),
+            stats.append(dict(rows=int(t.size), repeated_rows=int(np.sum(dt == 0)), stale_rows=int(stale.size),
                               max_step_over_nominal=float(dt.max() * fs),
                               jitter_of_kept_steps=float(np.max(np.abs(dt[(dt > 0) & (dt < 1.5 / fs)] * fs - 1)))))
         name = f"traj{i}"
