@@ -34,6 +34,7 @@ import numpy as np
 
 from ._dh import from_dh
 from ._errors import ConfigError, JFlexError
+from ._paths import shipped_dirs
 from ._robot import Robot
 from ._runs import load_yaml
 from ._urdf import load_urdf
@@ -43,12 +44,12 @@ _COLUMNS = ("alpha", "a", "d", "theta")
 
 def config_dirs() -> list[pathlib.Path]:
     """Folders searched for robot names: ``$JFLEX_CONFIGS/robots``, ``./configs/robots`` and the
-    ``configs/robots`` of the source tree jflex was installed from."""
+    ``configs/robots`` jflex ships (inside the installed package, or in the source checkout)."""
     dirs = []
     if os.environ.get("JFLEX_CONFIGS"):
         dirs.append(pathlib.Path(os.environ["JFLEX_CONFIGS"]) / "robots")
     dirs.append(pathlib.Path.cwd() / "configs" / "robots")
-    dirs.append(pathlib.Path(__file__).resolve().parent.parent / "configs" / "robots")
+    dirs.extend(d / "robots" for d in shipped_dirs("configs"))
     return dirs
 
 

@@ -16,9 +16,9 @@ import numpy as np
 from . import __version__
 from ._config import available_robots, config_dirs, load_robot, robot_from_config
 from ._errors import JFlexError
+from ._paths import shipped_dirs
 from ._runs import load_yaml, make_run_dir, write_results
 
-_REPO = pathlib.Path(__file__).resolve().parent.parent
 _PLUGINS = ("jflex.gap._cli",)
 
 
@@ -37,9 +37,10 @@ def _load_plugin(name: str):
 
 
 def experiments() -> dict[str, pathlib.Path]:
-    """``experiments/*.py`` by name: the working directory's first, then the repository's."""
+    """``experiments/*.py`` by name: the working directory's first, then the ones jflex ships
+    (the installed package's, or the source checkout's)."""
     found: dict[str, pathlib.Path] = {}
-    for base in (pathlib.Path.cwd() / "experiments", _REPO / "experiments"):
+    for base in (pathlib.Path.cwd() / "experiments", *shipped_dirs("experiments")):
         if base.is_dir():
             for path in sorted(base.glob("*.py")):
                 if not path.name.startswith("_"):
@@ -87,10 +88,13 @@ def _experiment_table() -> str:
 
 
 def _default_config(name: str) -> pathlib.Path:
-    for base in (pathlib.Path.cwd() / "configs", _REPO / "configs"):
+    """``configs/<name>`` of the working directory, else the one jflex ships."""
+    bases = [pathlib.Path.cwd() / "configs", *shipped_dirs("configs")]
+    for base in bases:
         if (base / name).is_file():
             return base / name
-    return _REPO / "configs" / name
+    raise JFlexError(f"default config {name} not found in {', '.join(str(b) for b in bases)}: "
+                     "is jflex installed complete? (pass a config path)")
 
 
 def cmd_info(args) -> int:
@@ -247,12 +251,17 @@ def run_gap_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
 def cmd_demo(args) -> int:
     from ._demo_config import DemoConfig
 
-    return _run("demo", _default_config("demo.yaml"), run_gap_demo, args, schema=DemoConfig)
+    return _run("demo", args.config or _default_config("demo.yaml"), run_gap_demo, args, schema=DemoConfig)
 
 
 def cmd_run(args) -> int:
     """Run ``experiments/<name>.py`` with the remaining arguments (``--list``: list them)."""
     if args.list:
+        if not experiments():
+            raise JFlexError(
+                "no experiment scripts found: none in ./experiments, and this jflex install ships none "
+                f"(looked in {', '.join(str(d) for d in shipped_dirs('experiments')) or 'jflex/experiments'})"
+            )
         print(_experiment_table())
         return 0
     if args.experiment is None:
