@@ -251,10 +251,16 @@ def test_case_init_guesses_the_column_map(tmp_path):
     assert cfg["robot"] == "robot.yaml" and (out / "robot.yaml").is_file() and (out / "run1.csv").is_file()
     assert d["columns"] == _csv_entry("run1", "train", rates=True)["columns"]
     assert d["units"] == {"time": "ms", "position": "deg"}
-    # the motor currents' scale is the user's to give: 1.0 and a TODO
-    assert d["scale"] == {"shoulder_current_A": 1.0, "elbow_current_A": 1.0} and "datasets[0].scale" in text
-    # add the validation log the comments ask for: the case loads
+    # the motor currents' scale is the user's to give: a TODO, which the loader refuses by field
+    assert all(v.startswith("TODO") for v in d["scale"].values()) and "datasets[0].scale" in text
+    assert sorted(d["scale"]) == ["elbow_current_A", "shoulder_current_A"]
     cfg["datasets"].append(dict(d, file="run1.csv", split="validation", name="val"))
+    (out / "case.yaml").write_text(yaml.safe_dump(cfg))
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[0\]\.scale\.\w+_current_A.*not filled in"):
+        load_case(out)
+    # the constants filled in: the case loads
+    for e in cfg["datasets"]:
+        e["scale"] = {c: KT * GEAR for c in e["scale"]}
     (out / "case.yaml").write_text(yaml.safe_dump(cfg))
     assert len(load_case(out).datasets) == 2
     # a second init does not overwrite it
@@ -273,6 +279,11 @@ def test_case_init_leaves_todo_where_it_cannot_guess(tmp_path):
     cols = cfg["datasets"][0]["columns"]
     assert cols["time"] == "stamp" and cols["torque"]["shoulder"] == "motor_i_1"
     assert cols["position"]["shoulder"].startswith("TODO") and cols["torque"]["elbow"].startswith("TODO")
+    # the current's constant is asked for first (the schema), then the columns (the file)
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[0\]\.scale\.motor_i_1': not filled in"):
+        load_case(tmp_path)
+    cfg["datasets"][0]["scale"] = {"motor_i_1": 20.0}
+    (tmp_path / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     with pytest.raises(jflex.ConfigError, match=r"datasets\[0\]\.columns\.position\.shoulder': column 'TODO"):
         load_case(tmp_path)
 

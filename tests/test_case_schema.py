@@ -132,7 +132,7 @@ def test_valid_case_options_and_noise(tmp_path, good):
     c = load_case(good)
     # options come with their defaults (the diagnosis reads them); noise holds only what is stated
     assert c.options == {"inertia_prior": 1.0, "refit_inertia": True, "filter_cutoff_hz": "auto", "decimate": 1,
-                         "max_effects": 3}
+                         "max_effects": 3, "keep_channels": [], "replace_spikes": False}
     assert c.noise == {}
     folder = _case(tmp_path, good, lambda c: c.update(
         options={"filter_cutoff_hz": 12, "decimate": 2, "refit_inertia": False}, noise={"modal_frequency_pct": 2},

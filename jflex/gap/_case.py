@@ -17,7 +17,10 @@ from .._config import load_robot
 from .._errors import ConfigError, DataError, JFlexError
 from .._runs import load_yaml
 from .._schema import validate
-from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, file_format
+from ..data._condition import condition_torque
+from ..data._npz import load_npz_fields
+from ..data._posture import yaml_posture as yaml_posture
+from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, RobotSpec, file_format
 
 __all__ = ["Case", "Dataset", "load_case", "case_path", "EFFECT_NAMES", "KINDS", "SPLITS"]
 
@@ -29,6 +32,12 @@ class Dataset:
     ``arrays`` holds the NPZ fields; for torque data ``q`` is reordered to the model's joints and
     ``q_extra`` / ``extra_joints`` keep the columns of joints the model leaves out. For FRF and
     modal data ``q0`` likewise becomes the model posture and ``q0_extra`` the rest.
+
+    ``conditioning`` is what the data layer did to the samples (:mod:`jflex.data`: stamps made
+    uniform, channels checked, spikes counted; for the report); ``excluded_channels`` the model
+    joints whose torque channel it found dead, flat, stuck, saturated or few-level and that the
+    case does not keep (``options.keep_channels``): the gap leaves them out. ``channels`` holds
+    the per-channel metadata (:class:`jflex.data.Channel`), ``files`` every file read.
     """
 
     kind: str
@@ -37,6 +46,10 @@ class Dataset:
     name: str
     arrays: dict
     extra_joints: tuple[str, ...] = ()
+    conditioning: dict = dataclasses.field(default_factory=dict)
+    excluded_channels: tuple[str, ...] = ()
+    channels: dict = dataclasses.field(default_factory=dict)
+    files: tuple = ()
 
 
 @dataclasses.dataclass
@@ -54,6 +67,12 @@ class Case:
     def split(self, split: str, kind: str | None = None) -> list[Dataset]:
         """The data sets of ``split`` (``train``/``validation``), of ``kind`` if given."""
         return [d for d in self.datasets if d.split == split and (kind is None or d.kind == kind)]
+
+    @property
+    def excluded_channels(self) -> tuple[str, ...]:
+        """Model joints whose torque channel some data set left out, in model order."""
+        bad = {j for d in self.datasets for j in d.excluded_channels}
+        return tuple(j for j in self.robot.joint_names if j in bad)
 
 
 def _err(file, field, msg):
@@ -81,24 +100,7 @@ def _resolve_joints(spec, robot, file, field) -> tuple[str, ...]:
 
 
 def _load_npz(path: pathlib.Path, field: str, case_file) -> dict:
-    if not path.is_file():
-        raise ConfigError(f"{case_file}: field '{field}': data file {path} not found")
-    try:
-        z = np.load(path, allow_pickle=False)
-    except Exception as exc:  # a torn or non-NPZ file
-        raise DataError(f"{case_file}: field '{field}': {path.name} is not a readable NPZ file "
-                        f"({type(exc).__name__}: {exc})") from None
-    if not hasattr(z, "files"):  # a bare .npy array
-        raise DataError(f"{case_file}: field '{field}': {path.name} is a single .npy array, not an NPZ archive of fields")
-    out = {}
-    with z:
-        for k in z.files:
-            try:
-                out[k] = z[k]
-            except Exception as exc:  # object arrays (pickles) are refused, or a torn member
-                raise DataError(f"{path}: field '{k}': not readable ({type(exc).__name__}: {exc}); "
-                                "fields are numeric or string arrays") from None
-    return out
+    return load_npz_fields(path, field, case_file)
 
 
 def _num(arr, path, field, *, ndim=None, complex_ok=False, allow_nan=False):
@@ -135,46 +137,66 @@ def _columns(arrs, path, robot, width_field: str, width: int):
     return list(range(width)), [], ()
 
 
-def _torque(arrs, path, robot):
+def _torque(arrs, path, robot, options=None):
+    """The torque data set's arrays in model joint order, conditioned (:func:`jflex.data.condition_torque`:
+    stamps made uniform, torque channels checked). **Returns** ``(arrays, extra joints, report,
+    excluded joints)``."""
+    options = options or {}
     for k in ("t", "q", "tau"):
         if k not in arrs:
             raise DataError(f"{path}: field '{k}': missing (a torque data set needs t (N,), q (N, n), tau (N, n))")
     t = _num(arrs["t"], path, "t", ndim=1)
     if t.size < 20:
         raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
-    if np.any(np.diff(t) <= 0):
-        raise DataError(f"{path}: field 't': time must be strictly increasing")
     q = _num(arrs["q"], path, "q", ndim=2)
     if q.shape[0] != t.size:
         raise DataError(f"{path}: field 'q': {q.shape[0]} rows but 't' has {t.size} samples")
     idx, extra, extra_names = _columns(arrs, path, robot, "q", q.shape[1])
     n = robot.nq
-    out = {"t": t, "q": q[:, idx], "q_extra": q[:, extra]}
+    rows = {"q": q[:, idx], "q_extra": q[:, extra]}
     tau = _num(arrs["tau"], path, "tau", ndim=2)
     if tau.shape[0] != t.size:
         raise DataError(f"{path}: field 'tau': {tau.shape[0]} rows but 't' has {t.size} samples")
-    if tau.shape[1] == q.shape[1] and q.shape[1] != n:
+    # with a 'joints' array, torque columns as wide as the angle columns follow it like them
+    # (permuted or with extra joints); otherwise they are in model joint order
+    permuted = tau.shape[1] == q.shape[1] and ("joints" in arrs or q.shape[1] != n)
+    if permuted:
         tau = tau[:, idx]
     if tau.shape[1] != n:
         raise DataError(f"{path}: field 'tau': expected {n} columns (model joints {list(robot.joint_names)}), got {tau.shape[1]}")
-    out["tau"] = tau
+    rows["tau"] = tau
     for k in ("qd", "qdd"):
         if k in arrs:
             a = _num(arrs[k], path, k, ndim=2)
             if a.shape != q.shape:
                 raise DataError(f"{path}: field '{k}': expected shape {q.shape} (as q), got {a.shape}")
-            out[k] = a[:, idx]
-    # derivatives missing: central differences of q (documented; smooth data assumed)
+            rows[k] = a[:, idx]
+    reps = None
+    if "tau_repeats" in arrs:
+        r = _num(arrs["tau_repeats"], path, "tau_repeats", ndim=3)
+        if r.shape[1:] != (t.size, arrs["tau"].shape[1]):
+            raise DataError(f"{path}: field 'tau_repeats': expected (R, {t.size}, {arrs['tau'].shape[1]}) (repeats of "
+                            f"tau), got {r.shape}")
+        reps = r[:, :, idx] if permuted else r
+    if reps is not None and np.any(np.diff(t) <= 0):
+        raise DataError(f"{path}: field 't': time must be strictly increasing (a set with tau_repeats is not resampled)")
+    if reps is not None:
+        rows["tau_repeats"] = np.moveaxis(reps, 0, 1)  # rows first, so conditioning keeps them aligned
+    t, out, report, excluded = condition_torque(
+        t, rows, list(robot.joint_names), str(path), keep=tuple(options.get("keep_channels") or ()),
+        replace_spikes=bool(options.get("replace_spikes", False)))
+    if "tau_repeats" in out:
+        out["tau_repeats"] = np.moveaxis(out["tau_repeats"], 1, 0)
+    out["t"] = t
+    if t.size < 20:
+        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
+    # derivatives missing: central differences of q (documented; the diagnosis filters an
+    # angle-only or velocity-only set before differentiating, see jflex.gap.torque_set)
     if "qd" not in out:
         out["qd"] = np.gradient(out["q"], t, axis=0)
     if "qdd" not in out:
         out["qdd"] = np.gradient(out["qd"], t, axis=0)
-    if "tau_repeats" in arrs:
-        r = _num(arrs["tau_repeats"], path, "tau_repeats", ndim=3)
-        if r.shape[1:] != tau.shape:
-            raise DataError(f"{path}: field 'tau_repeats': expected (R, {tau.shape[0]}, {n}), got {r.shape}")
-        out["tau_repeats"] = r
-    return out, extra_names
+    return out, extra_names, report, excluded
 
 
 def _posture(arrs, path, robot):
@@ -198,7 +220,11 @@ def _frf(arrs, path, robot):
         raise DataError(f"{path}: field 'H': expected shape ({f.size}, 3, 3) (freq x output x input), got {H.shape}")
     out = {"q0": q0, "q0_extra": q0x, "freq": f, "H": H.astype(complex)}
     if "H_repeats" in arrs:
-        out["H_repeats"] = _num(arrs["H_repeats"], path, "H_repeats", ndim=4, complex_ok=True).astype(complex)
+        r = _num(arrs["H_repeats"], path, "H_repeats", ndim=4, complex_ok=True).astype(complex)
+        if r.shape[1:] != H.shape or r.shape[0] < 2:
+            raise DataError(f"{path}: field 'H_repeats': expected shape (R, {f.size}, 3, 3) with R >= 2 repeats of H, "
+                            f"got {r.shape}")
+        out["H_repeats"] = r
     return out, names
 
 
@@ -352,6 +378,8 @@ def case_path(base: pathlib.Path, rel: str, field: str, case_file, allow_outside
     symbolic link pointing out, resolved first) raise :class:`ConfigError` naming the field; the
     file is not opened.
     """
+    if "\x00" in rel:
+        raise _err(case_file, field, f"{rel[:80]!r} contains a NUL byte; expected a file path")
     p = pathlib.Path(rel)
     if allow_outside:
         return base / p
@@ -365,15 +393,50 @@ def case_path(base: pathlib.Path, rel: str, field: str, case_file, allow_outside
 
 
 def _load_robot(spec: str, base, file, allow_outside):
+    within = None  # a robot YAML in the case names its URDF inside the case folder too (unless allowed out)
     if pathlib.PurePath(spec).suffix.lower() in (".urdf", ".yaml", ".yml"):
         rp = case_path(base, spec, "robot", file, allow_outside)
         target = str(rp)
+        within = None if allow_outside else base
     elif _CONFIG_NAME.match(spec):
         target = spec
     else:
         raise _err(file, "robot", f"expected a .urdf/.yaml file or a config name such as panda, got {spec!r}")
     try:
-        return load_robot(target)
+        return load_robot(target, within=within)
+    except JFlexError as exc:
+        raise ConfigError(f"{file}: field 'robot': {exc}") from None
+
+
+def _load_reduced_robot(rs, base, file, allow_outside):
+    """The robot of a ``robot: {file, joints, lock}`` entry: a URDF (or a robot YAML / config name
+    resolving to one) reduced to ``joints``, the others locked (:func:`jflex.load_urdf`)."""
+    from .._config import _example_robot_urdf, robot_from_config
+    from .._urdf import load_urdf
+
+    spec = rs.file
+    suffix = pathlib.PurePath(spec).suffix.lower()
+    red = {k: v for k, v in (("joints", rs.joints), ("lock", rs.lock)) if v is not None}
+    try:
+        if suffix == ".urdf":
+            return load_urdf(case_path(base, spec, "robot.file", file, allow_outside), **red)
+        if suffix in (".yaml", ".yml"):
+            rp = case_path(base, spec, "robot.file", file, allow_outside)
+            cfg = load_yaml(rp)
+            if not isinstance(cfg, dict) or "urdf" not in cfg:
+                raise _err(file, "robot.joints", f"{rp.name} is not a robot YAML naming a URDF (urdf:); only a URDF "
+                           "robot is reduced")
+            cfg = {**cfg, **red}
+            return robot_from_config(cfg, where=str(rp), base=rp.parent)
+        if not _CONFIG_NAME.match(spec):
+            raise _err(file, "robot.file", f"expected a .urdf/.yaml file or a config name such as panda, got {spec!r}")
+        urdf = _example_robot_urdf(spec)
+        if urdf is None:
+            raise _err(file, "robot.file", f"{spec!r} is not a robot whose URDF can be reduced (joints/lock need a "
+                       "URDF: name the .urdf file)")
+        return load_urdf(urdf, **red)
+    except ConfigError:
+        raise
     except JFlexError as exc:
         raise ConfigError(f"{file}: field 'robot': {exc}") from None
 
@@ -414,9 +477,11 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
     naming the file and field of the first problem found. The schema of ``case.yaml`` is
     :class:`jflex.gap._schema.CaseSpec` (the table in ``docs/case_format.md``).
     """
-    from ._csv import csv_arrays
-    from ._rosbag import rosbag_arrays
-    from ._uff import uff_arrays
+    from ..data._csv import read_csv
+    from ..data._npz import read_npz
+    from ..data._record import Record
+    from ..data._rosbag import read_rosbag
+    from ..data._uff import uff_arrays
 
     p = pathlib.Path(path)
     file = p / "case.yaml" if p.is_dir() else p
@@ -424,7 +489,10 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
     base = file.parent
     spec = validate(CaseSpec, load_yaml(file), file, context={"folder": base})
-    robot = _load_robot(spec.robot, base, file, allow_outside)
+    if isinstance(spec.robot, RobotSpec):
+        robot = _load_reduced_robot(spec.robot, base, file, allow_outside)
+    else:
+        robot = _load_robot(spec.robot, base, file, allow_outside)
     if spec.robot_inertia is not None:
         # link parameters realised from identified base parameters need not be physically
         # consistent per link (only their combinations are identified): taken as they are
@@ -448,21 +516,35 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         fld = f"datasets[{i}]"
         if d.kind == "frf" and tool is None:
             raise _err(file, "tool_frame", f"needed by the frf data set {fld} (FRFs are at the tool frame)")
-        fpath = case_path(base, d.file, f"{fld}.file", file, allow_outside)
-        fmt = file_format(d.file, base)
+        many = isinstance(d.file, list)
+        fpaths = [case_path(base, f, f"{fld}.file" + (f"[{k}]" if many else ""), file, allow_outside)
+                  for k, f in enumerate(d.file if many else [d.file])]
+        fpath = fpaths[0]
+        fmt = file_format(fpaths[0].name if many else d.file, base)
         if fmt == "csv":
-            arrs = csv_arrays(fpath, d, robot, file, fld)
+            rec = read_csv(fpaths, d, robot, file, fld)
         elif fmt == "rosbag":
-            arrs = rosbag_arrays(fpath, d, robot, file, fld)
+            rec = read_rosbag(fpath, d, robot, file, fld)
         elif fmt == "uff":
-            arrs = uff_arrays(fpath, d, robot, file, fld)
+            rec = Record(uff_arrays(fpath, d, robot, file, fld))
         else:
-            arrs = _load_npz(fpath, f"{fld}.file", file)
-        data, extra = _LOADERS[d.kind](arrs, fpath, robot)
+            rec = read_npz(fpath, f"{fld}.file", file)
+        cond, excluded = dict(rec.conditioning), ()
+        if d.kind == "torque":
+            data, extra, report, excluded = _torque(rec.arrays, fpath, robot, spec.options.model_dump())
+            if "sampling" in cond:  # the reader resampled already: its numbers describe the raw stamps
+                report["sampling"] = {**report["sampling"], **cond.pop("sampling")}
+            cond.update(report)
+            for j, c in report["channels"].items():
+                if c["flags"]:
+                    rec.flag(f"tau:{j}", *c["flags"])
+        else:
+            data, extra = _LOADERS[d.kind](rec.arrays, fpath, robot)
         if d.kind == "response" and tool is None and any(c in TIP_CHANNELS for c in data["channels"]):
             raise _err(file, "tool_frame", f"needed by the response data set {fld} ({fpath.name}): its tip channels "
                        "are positions of the tool frame")
-        datasets.append(Dataset(d.kind, fpath, d.split, d.name or fpath.stem, data, extra))
+        datasets.append(Dataset(d.kind, fpath, d.split, d.name or fpath.stem, data, extra, cond, excluded,
+                                rec.channels, tuple(fpaths)))
     names = [d.name for d in datasets]
     if len(set(names)) != len(names):
         raise _err(file, "datasets", f"data set names must be unique, got {names}")
@@ -474,19 +556,3 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
     # defaults filled
     noise = spec.noise.model_dump(exclude_none=True)
     return Case(file, robot, tool, nominal, datasets, noise, spec.options.model_dump())
-
-
-def yaml_posture(spec, robot, case_file, fld: str, factor: float = 1.0) -> dict:
-    """The ``q0`` a case.yaml data set gives (CSV modal/response, UFF frf) as NPZ fields: ``q0``
-    and, for a mapping that names joints the model lacks, ``joints``; angles times ``factor``."""
-    q0 = spec.q0
-    names = list(robot.joint_names)
-    if isinstance(q0, dict):
-        missing = [j for j in names if j not in q0]
-        if missing:
-            raise _err(case_file, f"{fld}.q0", f"no angle for model joints {missing} (the model has joints {names})")
-        return {"q0": factor * np.asarray(list(q0.values()), float), "joints": np.asarray(list(q0))}
-    if len(q0) != len(names):
-        raise _err(case_file, f"{fld}.q0", f"expected {len(names)} angles (model joints {names} in that order), "
-                   f"got {len(q0)}")
-    return {"q0": factor * np.asarray(q0, float)}

@@ -13,6 +13,7 @@ import yaml
 
 from .._config import load_robot
 from .._errors import ConfigError
+from .._runs import load_yaml
 from ._csv import Table
 
 TIME_WORDS = ("time", "t", "timestamp", "stamp", "sec", "secs")
@@ -71,31 +72,73 @@ def guess_columns(header: list[str], joints: list[str]) -> dict:
     return out
 
 
-def case_init(robot: str, log: str | pathlib.Path, out: str | pathlib.Path | None = None) -> pathlib.Path:
-    """Write ``case.yaml`` for the CSV ``log`` and the robot ``robot`` (a URDF / robot YAML file
-    or a config name) into ``out`` (default: the log's folder), copying the log and the robot file
-    there when they lie elsewhere. Refuses to overwrite a case.yaml.
+def _copy_robot(robot: str, folder: pathlib.Path, local) -> str:
+    """Copy the robot file into the case folder with every file it needs: a robot YAML's URDF is
+    copied beside it and the copy's ``urdf:`` rewritten to it (meshes are not read)."""
+    rpath = pathlib.Path(robot)
+    suffix = rpath.suffix.lower()
+    if suffix == ".urdf":
+        return local(rpath)
+    if suffix not in (".yaml", ".yml"):
+        return str(robot)
+    cfg = load_yaml(rpath)
+    if isinstance(cfg, dict) and isinstance(cfg.get("urdf"), str):
+        urdf = (rpath.parent / cfg["urdf"]).resolve()
+        if not urdf.is_file():
+            raise ConfigError(f"{rpath}: field 'urdf': {cfg['urdf']} not found (relative to the YAML file)")
+        name = local(urdf)
+        target = folder / rpath.name
+        if target.exists() and target.resolve() != rpath.resolve():
+            raise ConfigError(f"{target}: exists already (jflex case init does not overwrite it)")
+        if target.resolve() != rpath.resolve() or cfg["urdf"] != name:
+            target.write_text(f"# {rpath.name} as 'jflex case init' copied it, its URDF beside it\n"
+                              + yaml.safe_dump({**cfg, "urdf": name}, sort_keys=False))
+        return rpath.name
+    return local(rpath)
+
+
+def case_init(robot: str, log, out: str | pathlib.Path | None = None) -> pathlib.Path:
+    """Write ``case.yaml`` for the CSV ``log`` (or a list of CSV logs of one run: positions,
+    velocities, efforts, each with the time column, merged on time by the loader) and the robot
+    ``robot`` (a URDF / robot YAML file or a config name) into ``out`` (default: the first log's
+    folder), copying the logs and every file the robot needs there when they lie elsewhere (a
+    robot YAML and the URDF it names). When the logs drive only some of a URDF robot's joints,
+    the case reduces the robot to them (``robot: {file, joints}``). A motor-current column gets
+    ``scale: TODO``, which :func:`jflex.gap.load_case` refuses until the torque constant is filled
+    in. Refuses to overwrite a case.yaml.
 
     **Returns:** the path of the written case.yaml.
     """
-    log = pathlib.Path(log)
-    folder = pathlib.Path(out) if out is not None else log.parent
+    logs = [pathlib.Path(p) for p in (log if isinstance(log, (list, tuple)) else [log])]
+    if not logs:
+        raise ConfigError("jflex case init: no CSV log given")
+    folder = pathlib.Path(out) if out is not None else logs[0].parent
     folder.mkdir(parents=True, exist_ok=True)
     target = folder / "case.yaml"
     if target.exists():
         raise ConfigError(f"{target}: exists already (jflex case init does not overwrite a case)")
     rob = load_robot(robot)
     joints = list(rob.joint_names)
-    table = Table(log)
-    g = guess_columns(table.header, joints)
+    tables = [Table(p) for p in logs]
+    header = [h for tb in tables for h in tb.header]
+    g = guess_columns(header, joints)
+    if len(tables) > 1 and g["time"] is not None:
+        lacking = [p.name for p, tb in zip(logs, tables) if g["time"] not in tb.header]
+        if lacking:
+            raise ConfigError(f"jflex case init: the time column {g['time']!r} is not in {lacking}: logs merged on "
+                              "time each hold it")
 
     def local(p: pathlib.Path) -> str:
         if p.resolve().parent != folder.resolve():
             shutil.copy2(p, folder / p.name)
         return p.name
 
-    rpath = pathlib.Path(robot)
-    robot_entry = local(rpath) if rpath.suffix.lower() in (".urdf", ".yaml", ".yml") else str(robot)
+    robot_entry = _copy_robot(str(robot), folder, local)
+    reduced = None
+    urdf_robot = pathlib.Path(str(robot)).suffix.lower() in (".urdf", ".yaml", ".yml")
+    if urdf_robot and g["position"] and len(g["position"]) < len(joints):
+        reduced = [j for j in joints if j in g["position"]]
+        joints = reduced
     todo = []
 
     def per_joint(role, what):
@@ -110,17 +153,23 @@ def case_init(robot: str, log: str | pathlib.Path, out: str | pathlib.Path | Non
                "torque": per_joint("torque", "torque or motor current")}
     if g["time"] is None:
         todo.append("columns.time")
-    if len(g["velocity"]) == len(joints):
+    if all(j in g["velocity"] for j in joints):
         columns["velocity"] = {j: g["velocity"][j] for j in joints}
-    entry = {"kind": "torque", "file": local(log), "split": "train", "columns": columns}
-    if g["current"]:
-        entry["scale"] = {c: 1.0 for c in g["current"]}
-        todo.append("scale (torque constant [N m/A] x gear ratio of each motor current column)")
+    files = [local(p) for p in logs]
+    entry = {"kind": "torque", "file": files[0] if len(files) == 1 else files, "split": "train", "columns": columns}
+    currents = [c for c in g["current"] if c in columns["torque"].values()]
+    if currents:
+        entry["scale"] = {c: f"{TODO}: torque constant [N m/A] x gear ratio" for c in currents}
+        todo.append("scale (torque constant [N m/A] x gear ratio of each motor current column; the case is refused "
+                    "until it is filled in)")
     entry["units"] = {"time": g["units"].get("time", "s"), "position": g["units"].get("position", "rad")}
-    cfg = {"robot": robot_entry, "nominal_effects": [], "datasets": [entry]}
+    cfg = {"robot": {"file": robot_entry, "joints": reduced} if reduced else robot_entry,
+           "nominal_effects": [], "datasets": [entry]}
     head = [
-        f"# case.yaml written by 'jflex case init' for {log.name} (format: docs/case_format.md).",
-        f"# Robot joints: {joints}; CSV columns: {table.header}.",
+        f"# case.yaml written by 'jflex case init' for {', '.join(p.name for p in logs)} (format: docs/case_format.md).",
+        f"# Robot joints: {list(rob.joint_names)}; CSV columns: {header}.",
+        *([f"# The logs drive {reduced}: the robot is reduced to them (the others locked at 0; add "
+           "robot.lock to lock them elsewhere)."] if reduced else []),
         "# Check the guessed column map and units; fill in every TODO:",
         *[f"#   - datasets[0].{t}" for t in todo],
         "#   - a validation data set: another log with split: validation (the gap is judged on held-out data)",

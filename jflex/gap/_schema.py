@@ -132,6 +132,12 @@ class Options(Strict):
         json_schema_extra={"expects": "number > 0 or `auto`"})
     decimate: Annotated[int, Field(ge=1)] = Field(1, description="keep every n-th sample of filtered torque data")
     max_effects: Annotated[int, Field(ge=0)] = Field(3, description="most effects the selection adds")
+    keep_channels: list[str] = Field(
+        [], description="torque channels (joint names) kept in the gap although the data check found them dead, "
+                        "flat, stuck, saturated or few-level", json_schema_extra={"expects": "list of joint names"})
+    replace_spikes: bool = Field(
+        False, description="replace the spikes found in torque channels by interpolation (else they are only "
+                           "counted and reported)")
 
     @field_validator("filter_cutoff_hz", mode="before")
     @classmethod
@@ -166,18 +172,70 @@ class Columns(Strict):
 class Units(Strict):
     """Units of a CSV data set's columns (after `scale`)."""
 
-    time: Literal["s", "ms"] = Field("s", description="time column unit")
+    time: Literal["s", "ms", "us", "ns"] = Field("s", description="time column unit")
     position: Literal["rad", "deg"] = Field(
         "rad", description="angles, their rates (per s) and accelerations (per s^2), `q0` and joint outputs")
+
+
+class Coupling(Strict):
+    """A coupled transmission: motors that drive several joints (e.g. a wrist whose motors 5 and 6
+    both move joints 5 and 6)."""
+
+    joints: Annotated[list[str], Field(min_length=2)] = Field(
+        description="the coupled joints; the torque column of each is its motor's current",
+        json_schema_extra={"expects": "list of 2 or more joint names"})
+    matrix: list[list[float]] = Field(
+        description="K (m x m): motor rates = K x joint rates, rows motors and columns joints in the order of "
+                    "`joints`; joint torques = K^T x motor torques", json_schema_extra={"expects": "square list of rows"})
+
+    @model_validator(mode="after")
+    def _square(self):
+        m = len(self.joints)
+        if len(set(self.joints)) != m:
+            raise _bad("coupling", "joint names must be unique, got {got}", at="joints", got=self.joints)
+        if len(self.matrix) != m or any(len(r) != m for r in self.matrix):
+            raise _bad("coupling", "expected {m} rows of {m} numbers (one row per motor of {joints}), got {got}",
+                       at="matrix", m=m, joints=self.joints, got=self.matrix)
+        for r in self.matrix:
+            for x in r:
+                _number(x, "", x)
+        import numpy as np
+
+        if abs(np.linalg.det(np.asarray(self.matrix, float))) < 1e-12:
+            raise _bad("coupling", "singular (every motor must move the joints independently)", at="matrix")
+        return self
+
+
+TODO = "TODO"
+
+
+def _factors(v, what: str, rule: str):
+    if v is None:
+        return v
+    if not isinstance(v, dict):
+        raise _bad("mapping", "expected a mapping {what}: number, got {got}", what=what, got=repr(v))
+    for k, x in v.items():
+        if not isinstance(k, str):
+            raise _bad("mapping", "expected {what} names as keys, got {got}", what=what, got=repr(k))
+        if isinstance(x, str) and x.strip().upper().startswith(TODO):
+            raise _bad("todo", "not filled in ({got}): state the number (for a motor current column: torque "
+                       "constant [N m/A] x gear ratio, from the motor and gear data sheets)", at=k, got=repr(x))
+        try:
+            _number(x, rule, x)
+        except PydanticCustomError:
+            raise _bad("mapping", "expected a finite number {rule}, got {got}", at=k, rule=rule, got=repr(x)) from None
+    return {k: float(x) for k, x in v.items()}
 
 
 class Dataset(Strict):
     """One measured data set."""
 
     kind: Literal[KINDS] = Field(description="what the file holds")
-    file: Annotated[str, Field(min_length=1)] = Field(
+    file: Annotated[str, Field(min_length=1)] | Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)] = Field(
         description="`.npz`, `.csv` (torque, response, modal), `.uff`/`.unv` (frf) or a ROS 2 bag (`.mcap` or a bag "
-                    "folder; torque, response) inside the case folder")
+                    "folder; torque, response) inside the case folder; or a list of CSV files of one run (e.g. "
+                    "positions, velocities, efforts), each with the time column, merged on time",
+        json_schema_extra={"expects": "file name or list of CSV file names"})
     split: Literal[SPLITS] = Field(description="`train`: fitted; `validation`: the gap is judged on it")
     name: Annotated[str, Field(min_length=1)] | None = Field(None, description="unique name (default: the file's stem)")
     columns: Columns | None = Field(None, description="CSV only: the column map (required for a CSV file)")
@@ -185,6 +243,15 @@ class Dataset(Strict):
         None, description="CSV: column -> factor applied to the raw column (e.g. current [A] x torque constant x "
                           "gear ratio); ROS 2 bag: joint -> factor applied to its `effort`",
         json_schema_extra={"expects": "mapping column (or joint): number != 0"})
+    offset: dict[str, float] | None = Field(
+        None, description="CSV: column -> raw value subtracted before `scale` (a current offset i0); ROS 2 bag: joint "
+                          "-> offset of its `effort`", json_schema_extra={"expects": "mapping column (or joint): number"})
+    coupling: Coupling | None = Field(
+        None, description="CSV and ROS 2 bag: a coupled transmission; torques = K^T (scale (raw - offset)) "
+                          "(+ `torque_offset`)")
+    torque_offset: dict[str, float] | None = Field(
+        None, description="CSV and ROS 2 bag: joint -> torque [N m] added after scale and coupling (e.g. a "
+                          "gravity-compensation spring or a sensor bias)", json_schema_extra={"expects": "mapping joint: number"})
     units: Units | None = Field(None, description="CSV only: units of the time and angle columns")
     delimiter: Literal[",", ";", "tab", "space"] | None = Field(
         None, description="CSV only: field separator (default: sniffed from the header line)")
@@ -199,18 +266,12 @@ class Dataset(Strict):
     @field_validator("scale", mode="before")
     @classmethod
     def _scale(cls, v):
-        if v is None:
-            return v
-        if not isinstance(v, dict):
-            raise _bad("scale", "expected a mapping column: factor, got {got}", got=repr(v))
-        for k, x in v.items():
-            if not isinstance(k, str):
-                raise _bad("scale", "expected column names as keys, got {got}", got=repr(k))
-            try:
-                _number(x, "!= 0", x)
-            except PydanticCustomError:
-                raise _bad("scale", "expected a finite number != 0, got {got}", at=k, got=repr(x)) from None
-        return {k: float(x) for k, x in v.items()}
+        return _factors(v, "column", "!= 0")
+
+    @field_validator("offset", "torque_offset", mode="before")
+    @classmethod
+    def _offsets(cls, v):
+        return _factors(v, "key", "")
 
     @field_validator("q0", mode="before")
     @classmethod
@@ -226,7 +287,12 @@ class Dataset(Strict):
 
     @model_validator(mode="after")
     def _format_keys(self, info: ValidationInfo):
-        fmt = file_format(self.file, (info.context or {}).get("folder"))
+        files = self.file if isinstance(self.file, list) else [self.file]
+        fmts = {file_format(f, (info.context or {}).get("folder")) for f in files}
+        if len(files) > 1 and fmts != {"csv"}:
+            raise _bad("file", "a list of files is for CSV logs of one run merged on time, got {got}", at="file",
+                       got=files)
+        fmt = fmts.pop()
         if fmt is None:
             raise _bad("file", "expected a .npz, .csv (torque, response, modal), .uff/.unv (frf) file or a ROS 2 bag "
                        "(.mcap, or a folder holding metadata.yaml; torque, response), got {got}",
@@ -239,9 +305,10 @@ class Dataset(Strict):
         for k in csv_only:
             if fmt != "csv" and getattr(self, k) is not None:
                 raise _bad("format_key", "only for CSV data sets (this file is {fmt})", at=k, fmt=fmt.upper())
-        if self.scale is not None and fmt not in ("csv", "rosbag"):
-            raise _bad("format_key", "only for CSV data sets and ROS 2 bags (this file is {fmt})", at="scale",
-                       fmt=fmt.upper())
+        for k in ("scale", "offset", "coupling", "torque_offset"):
+            if getattr(self, k) is not None and fmt not in ("csv", "rosbag"):
+                raise _bad("format_key", "only for CSV data sets and ROS 2 bags (this file is {fmt})", at=k,
+                           fmt=fmt.upper())
         if self.topic is not None and fmt != "rosbag":
             raise _bad("format_key", "only for ROS 2 bags (this file is {fmt})", at="topic", fmt=fmt.upper())
         if self.quantity is not None and fmt != "uff":
@@ -270,11 +337,37 @@ class Dataset(Strict):
         return self
 
 
+class RobotSpec(Strict):
+    """The nominal robot with a reduction: the joints the logs drive, the others locked."""
+
+    file: Annotated[str, Field(min_length=1)] = Field(
+        description="a URDF or robot YAML (with `urdf:`) inside the case folder, or a config name such as `panda`")
+    joints: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)] | None = Field(
+        None, description="the joints kept (every other moving joint locked at its `lock` value, or 0)",
+        json_schema_extra={"expects": "list of joint names"})
+    lock: dict[str, float] | None = Field(
+        None, description="joint -> value [rad or m] at which it is locked", json_schema_extra={"expects": "mapping joint: number"})
+
+    @field_validator("joints")
+    @classmethod
+    def _unique(cls, v):
+        if v is not None and len(set(v)) != len(v):
+            raise _bad("joints", "joint names must be unique, got {got}", got=v)
+        return v
+
+    @field_validator("lock", mode="before")
+    @classmethod
+    def _lock(cls, v):
+        return _factors(v, "joint", "")
+
+
 class CaseSpec(Strict):
     """case.yaml."""
 
-    robot: Annotated[str, Field(min_length=1)] = Field(
-        description="the nominal model: a URDF or robot YAML inside the case folder, or a config name such as `panda`")
+    robot: Annotated[str, Field(min_length=1)] | RobotSpec = Field(
+        description="the nominal model: a URDF or robot YAML inside the case folder, or a config name such as `panda`; "
+                    "or a mapping `{file, joints, lock}` reducing it to the joints the logs drive",
+        json_schema_extra={"expects": "file or config name, or mapping"})
     robot_inertia: Annotated[str, Field(min_length=1)] | None = Field(
         None, description="NPZ with `inertia` (n, 10): link parameters replacing the robot's")
     tool_frame: Annotated[str, Field(min_length=1)] | None = Field(

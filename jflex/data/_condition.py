@@ -1,0 +1,323 @@
+"""Conditioning of measured time series before any model sees them: time stamps made uniform,
+files merged on time, broken channels named, spikes found, the low-pass cutoff chosen per record,
+motor currents turned into joint torques. Every step says what it did in a report (a dict of
+plain numbers and strings, written into the diagnosis as it is).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._errors import DataError
+
+JITTER = 0.01  # largest deviation of a step from the median step kept as it is (relative)
+DROP = 1.5  # a step over 1.5 median steps: samples were dropped there
+MAX_GAP = 5.0  # longest step (in median steps) resampling may bridge: beyond, it would invent data
+
+DEAD_ZEROS = 0.5  # a channel reading exactly 0 in half of its samples or more is off
+STUCK_RUN = 0.25  # ... holding one value for a quarter of the record in one run is stuck
+FLAT_REL = 1e-4  # ... whose spread is below 1e-4 of the median spread of its fellows is flat
+SATURATED = 0.05  # ... sitting exactly at its largest or smallest value in 5 % of the samples clips
+FEW_LEVELS = 8  # ... taking fewer distinct values than this carries no waveform
+EXCLUDE_FLAGS = ("dead", "flat", "stuck", "saturated", "few_levels")  # left out of the gap
+
+SPIKE_WINDOW = 7  # samples of the running median a spike is measured against
+SPIKE_SIGMA = 8.0  # a spike stands this many robust standard deviations off the running median
+
+CUTOFF_FACTOR = 2.5  # the low-pass sits at 2.5 x the motion's band (the band's edge passes flat)
+CUTOFF_LIMIT = 0.8  # x Nyquist: the highest cutoff a record may get (its filter must still cut)
+FLOOR_SNR = 100.0  # fallback band: where the angle spectrum stands 100 x above its own high-frequency floor
+ENERGY_FRACTION = 0.999  # last fallback band: the frequency below which this share of the angle power lies
+
+
+def clean_stamps(t, arrays: dict, where: str):
+    """Repeated time stamps removed (the first row kept), a step back in time refused.
+
+    **Returns** ``(t, arrays, report)``; the report counts ``repeated_stamps`` (rows dropped) and
+    ``repeated_rows`` (rows equal to the previous one in every channel at a later stamp: a logger
+    that wrote a stale sample; counted, kept)."""
+    t = np.asarray(t, float)
+    dt = np.diff(t)
+    if np.any(dt < 0):
+        k = int(np.argmax(dt < 0))
+        raise DataError(f"{where}: field 't': time goes back at sample {k + 1} ({t[k + 1]:.9g} s after "
+                        f"{t[k]:.9g} s); sort the log or cut it there")
+    keep = np.concatenate([[True], dt > 0])
+    stacked = np.column_stack([np.asarray(a, float).reshape(t.size, -1) for a in arrays.values()]) if arrays \
+        else np.zeros((t.size, 0))
+    same_row = np.concatenate([[False], np.all(stacked[1:] == stacked[:-1], axis=1)]) if stacked.shape[1] else \
+        np.zeros(t.size, bool)
+    report = {"repeated_stamps": int((~keep).sum()), "repeated_rows": int((same_row & keep).sum())}
+    if keep.all():
+        return t, arrays, report
+    return t[keep], {k: np.asarray(a)[keep] for k, a in arrays.items()}, report
+
+
+def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max_gap: float = MAX_GAP,
+                     field: str = "t"):
+    """``t`` and ``arrays`` (rows at ``t``) as they are if every step is within ``jitter`` of the
+    median step, else linearly interpolated onto a uniform grid whose step is the mean of the
+    steps that dropped nothing (the median of jittered steps is a noisier estimate of the rate).
+    A gap over ``max_gap`` median steps is refused rather than bridged.
+
+    **Returns** ``(t, arrays, report)``: ``rate_hz``, ``jitter_pct`` (largest step deviation from
+    the median step), ``dropped_samples`` (missing samples at steps over 1.5 median steps),
+    ``resampled``."""
+    t = np.asarray(t, float)
+    dt = np.diff(t)
+    h = float(np.median(dt))
+    if not h > 0:
+        raise DataError(f"{where}: field '{field}': the median time step is {h:g} s (time must increase)")
+    dev = float(np.max(np.abs(dt - h)) / h)
+    drops = dt > DROP * h
+    report = {"rate_hz": 1.0 / h, "jitter_pct": 100.0 * dev,
+              "dropped_samples": int(np.sum(np.round(dt[drops] / h) - 1)), "resampled": False}
+    if dev <= jitter:
+        report["rate_hz"] = 1.0 / float(dt.mean())
+        return t, arrays, report
+    k = int(np.argmax(dt))
+    if dt[k] > max_gap * h:
+        raise DataError(f"{where}: field '{field}': a gap of {dt[k]:.6g} s after t = {t[k]:.6g} s ({dt[k] / h:.1f} median "
+                        f"steps of {h:.6g} s); resampling would invent the data in it (cut the log there into two "
+                        "data sets)")
+    step = float(np.mean(dt[~drops]))
+    grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step * (1 + 1e-12))) + 1)
+    out = {}
+    for key, a in arrays.items():
+        a = np.asarray(a, float)
+        flat = a.reshape(t.size, -1)
+        r = np.column_stack([np.interp(grid, t, flat[:, j]) for j in range(flat.shape[1])]) if flat.shape[1] \
+            else np.zeros((grid.size, 0))
+        out[key] = r.reshape((grid.size,) + a.shape[1:])
+    report.update(rate_hz=1.0 / step, resampled=True, samples_in=int(t.size), samples_out=int(grid.size))
+    return grid, out, report
+
+
+def merge_on_time(parts, where: str):
+    """Several logs of one run merged on time: ``parts`` is a list of ``(label, t, {column: (N_k,)})``.
+    Logs whose stamps agree (to 1e-9 of the step) are joined row by row; otherwise every log is
+    interpolated linearly onto the first log's stamps within the span all logs cover.
+
+    **Returns** ``(t, {column: (N,)}, report)``."""
+    label0, t0, cols0 = parts[0]
+    t0 = np.asarray(t0, float)
+    same = all(np.asarray(t).shape == t0.shape and np.allclose(t, t0, rtol=0, atol=1e-9 * np.median(np.diff(t0)))
+               for _, t, _ in parts[1:])
+    out = dict(cols0)
+    seen = {c: label0 for c in cols0}
+    if same:
+        for label, _, cols in parts[1:]:
+            for c, v in cols.items():
+                if c in seen:
+                    raise DataError(f"{where}: column {c!r} is in both {seen[c]} and {label}")
+                seen[c] = label
+                out[c] = np.asarray(v, float)
+        return t0, out, {"files": [p[0] for p in parts], "merged": "row by row (same stamps)"}
+    lo = max(float(np.min(t)) for _, t, _ in parts)
+    hi = min(float(np.max(t)) for _, t, _ in parts)
+    if not hi > lo:
+        raise DataError(f"{where}: the logs {[p[0] for p in parts]} share no time span")
+    m = (t0 >= lo) & (t0 <= hi)
+    out = {c: np.asarray(v, float)[m] for c, v in cols0.items()}
+    for label, t, cols in parts[1:]:
+        t = np.asarray(t, float)
+        if np.any(np.diff(t) <= 0):
+            raise DataError(f"{where}: {label}: time must increase to be merged by interpolation")
+        for c, v in cols.items():
+            if c in seen:
+                raise DataError(f"{where}: column {c!r} is in both {seen[c]} and {label}")
+            seen[c] = label
+            out[c] = np.interp(t0[m], t, np.asarray(v, float))
+    return t0[m], out, {"files": [p[0] for p in parts], "merged": f"interpolated onto the stamps of {label0}",
+                        "span_s": [lo, hi]}
+
+
+def _longest_run(x) -> int:
+    if x.size == 0:
+        return 0
+    change = np.flatnonzero(np.diff(x) != 0)
+    edges = np.concatenate([[-1], change, [x.size - 1]])
+    return int(np.max(np.diff(edges)))
+
+
+def channel_quality(x, fellow_std: float | None = None) -> dict:
+    """What is wrong with one channel ``x`` (N,): ``{"flags": [...], ...numbers}``.
+
+    ``dead``: exactly zero in ``DEAD_ZEROS`` of the samples or more (a sensor switched off);
+    ``flat``: constant, or its spread below ``FLAT_REL`` of ``fellow_std`` (the median spread of
+    the other channels of its kind); ``stuck``: one value held in a single run of ``STUCK_RUN`` of
+    the record; ``saturated``: ``SATURATED`` of the samples exactly at its largest or smallest
+    value (clipping); ``few_levels``: fewer than ``FEW_LEVELS`` distinct values."""
+    x = np.asarray(x, float)
+    n = max(x.size, 1)
+    zeros = float(np.mean(x == 0.0))
+    std = float(x.std())
+    levels = int(np.unique(x).size)
+    run = _longest_run(x) / n
+    rail = max(float(np.mean(x == x.max())), float(np.mean(x == x.min()))) if x.size else 0.0
+    flags = []
+    if zeros >= DEAD_ZEROS:
+        flags.append("dead")
+    if std == 0.0 or std <= 1e-12 * abs(float(x.mean())) or (fellow_std and std < FLAT_REL * fellow_std):
+        flags.append("flat")
+    elif run >= STUCK_RUN and "dead" not in flags:
+        flags.append("stuck")
+    if levels < FEW_LEVELS and std > 0 and "dead" not in flags:
+        flags.append("few_levels")
+    if levels >= FEW_LEVELS and rail >= SATURATED and "dead" not in flags:
+        flags.append("saturated")
+    return {"flags": flags, "zero_fraction": zeros, "std": std, "levels": levels, "longest_run_fraction": run,
+            "at_extreme_fraction": rail}
+
+
+def find_spikes(x) -> np.ndarray:
+    """Indices of isolated spikes in ``x`` (N,): samples more than ``SPIKE_SIGMA`` robust standard
+    deviations off the running median of ``SPIKE_WINDOW`` samples (a running median keeps steps,
+    such as friction reversing, and removes single-sample outliers). The scale is the larger of
+    the residual's spread (MAD) and the sample-to-sample step's (MAD / sqrt 2)."""
+    from scipy.ndimage import median_filter
+
+    x = np.asarray(x, float)
+    if x.size < 3 * SPIKE_WINDOW:
+        return np.zeros(0, int)
+    r = x - median_filter(x, size=SPIKE_WINDOW, mode="nearest")
+    # the larger of two robust scales: the spread of the residual off the running median (noise),
+    # and that of the sample-to-sample step (a smooth, fast signal bends off its running median)
+    d = np.diff(x)
+    sig = max(1.4826 * float(np.median(np.abs(r - np.median(r)))),
+              1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0))
+    if sig == 0.0:
+        return np.zeros(0, int)
+    return np.flatnonzero(np.abs(r) > SPIKE_SIGMA * sig)
+
+
+def replace_by_interpolation(x, idx) -> np.ndarray:
+    """``x`` with the samples ``idx`` replaced by linear interpolation between their neighbours."""
+    x = np.asarray(x, float).copy()
+    if len(idx):
+        good = np.ones(x.size, bool)
+        good[idx] = False
+        x[idx] = np.interp(np.flatnonzero(~good), np.flatnonzero(good), x[good])
+    return x
+
+
+def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_spikes: bool = False):
+    """Condition one torque record: stamps cleaned and made uniform, torque channels checked.
+
+    ``arrays``: ``q`` (N, m), ``tau`` (N, n) with ``joints`` (n,) naming the torque columns,
+    optional ``qd``/``qdd``/``q_extra`` rows. Torque channels flagged by :func:`channel_quality`
+    with one of ``EXCLUDE_FLAGS`` are listed as excluded unless their joint is in ``keep``.
+    Spikes are counted per channel and replaced only when ``replace_spikes``.
+
+    **Returns** ``(t, arrays, report, excluded)``: the report holds ``sampling`` (the stamps:
+    rate, jitter, drops, repeats, resampled), ``channels`` (per torque joint: flags and the
+    numbers behind them), ``spikes`` and ``derivatives`` (``given``, ``velocity`` (velocities
+    without accelerations: filtered before differentiation) or ``none``); ``excluded`` the
+    joints left out of the gap."""
+    rows = {k: v for k, v in arrays.items() if np.ndim(v) >= 1 and np.shape(v)[0] == np.size(t)}
+    rest = {k: v for k, v in arrays.items() if k not in rows}
+    t, rows, rep_stamps = clean_stamps(t, rows, where)
+    t, rows, rep_rate = resample_uniform(t, rows, where)
+    report = {"sampling": {**rep_rate, **rep_stamps}}
+    tau = np.asarray(rows["tau"], float).copy()
+    stds = tau.std(axis=0)
+    channels, spikes, excluded = {}, {}, []
+    for k, j in enumerate(joints):
+        others = np.delete(stds, k)
+        fellow = float(np.median(others)) if others.size else None
+        qual = channel_quality(tau[:, k], fellow)
+        bad = [f for f in qual["flags"] if f in EXCLUDE_FLAGS]
+        if bad and j not in keep:
+            excluded.append(j)
+        elif not bad:
+            idx = find_spikes(tau[:, k])
+            if idx.size:
+                spikes[j] = {"count": int(idx.size), "first_s": float(t[idx[0]]),
+                             "action": "replaced by interpolation" if replace_spikes else "flagged"}
+                qual["flags"].append("spikes")
+                if replace_spikes:
+                    tau[:, k] = replace_by_interpolation(tau[:, k], idx)
+        qual["kept_by_user"] = bool(bad) and j in keep
+        channels[j] = qual
+    rows["tau"] = tau
+    report["channels"] = channels
+    report["spikes"] = spikes
+    report["excluded"] = list(excluded)
+    report["derivatives"] = "given" if ("qd" in rows and "qdd" in rows) else "velocity" if "qd" in rows else "none"
+    return t, {**rows, **rest}, report, tuple(excluded)
+
+
+def choose_cutoff(q, dt: float, *, qd=None, factor: float = CUTOFF_FACTOR, decimate: int = 1,
+                  limit: float = CUTOFF_LIMIT):
+    """The low-pass cutoff [Hz] of one record, from its own angle spectrum, always inside
+    ``(0, limit x Nyquist)`` (the Nyquist frequency after ``decimate``).
+
+    First ``factor`` x the motion's band (:func:`jflex.identify.motion_band`: where the angle
+    spectrum stands above the angle noise). When that gives no answer (nothing above the noise, or a
+    band whose cutoff would not lie below ``limit`` x Nyquist: quantised, pre-filtered or
+    interpolated angles, whose sample-to-sample noise estimate is too low), the fallback
+    ``spectrum_floor``: ``factor`` x the highest frequency (below half the Nyquist frequency) where
+    the angle spectrum stands ``FLOOR_SNR`` above its own median level over (0.5, ``limit``) x
+    Nyquist. When that gives no answer either, ``energy``: ``factor`` x the frequency below which
+    ``ENERGY_FRACTION`` of the detrended angles' power lies (of ``qd`` when given). Should that too
+    reach the limit, the cutoff is the limit itself (``limit``).
+
+    **Returns** ``(cutoff, info)``: info names the ``method`` and holds ``motion_band_hz``,
+    ``nyquist_hz`` and ``angle_noise_rad``."""
+    from scipy.signal import detrend, welch
+
+    from ..identify._signal import angle_noise, motion_band
+
+    q = np.asarray(q, float)
+    nyq = float(0.5 / (dt * max(int(decimate), 1)))
+    top = limit * nyq
+    sig = angle_noise(q)
+    f_m = motion_band(q, dt, sig)
+    nper = min(q.shape[0], 1024)
+    df = 1.0 / (dt * nper)
+    info = {"motion_band_hz": f_m, "nyquist_hz": nyq, "limit_hz": top, "angle_noise_rad": sig.tolist()}
+    fc = factor * f_m
+    if f_m > 1.5 * df and fc < top:
+        return fc, {**info, "method": "motion_band"}
+    f, P = welch(detrend(q, axis=0), fs=1.0 / dt, nperseg=nper, window="blackmanharris", axis=0)
+    # fallback 1, "spectrum_floor": the angle noise as the spectrum itself shows it (its median
+    # level over the top of the band), not as the sample-to-sample spread estimates it
+    top_band = (f > 0.5 * nyq) & (f < top)
+    if top_band.sum() >= 3:
+        floor = np.median(P[top_band], axis=0)
+        above = (P > FLOOR_SNR * floor[None, :]).any(axis=1) & (f > 0)
+        above &= f < 0.5 * nyq
+        if above.any():
+            f_s = float(f[np.flatnonzero(above)[-1]])
+            info["floor_band_hz"] = f_s
+            fc = factor * f_s
+            if f_s > 1.5 * df and fc < top:
+                return fc, {**info, "method": "spectrum_floor"}
+    # fallback 2, "energy": where the angles' (or rates') power ends
+    x = np.asarray(qd, float) if qd is not None else q
+    f, P = welch(detrend(x, axis=0), fs=1.0 / dt, nperseg=nper, axis=0)
+    c = np.cumsum(P.sum(axis=1))
+    f_e = float(f[min(int(np.searchsorted(c, ENERGY_FRACTION * c[-1])), f.size - 1)]) if c[-1] > 0 else 0.0
+    info["energy_band_hz"] = f_e
+    fc = factor * max(f_e, df)
+    if fc < top:
+        return fc, {**info, "method": "energy"}
+    return top * (1 - 1e-9), {**info, "method": "limit"}
+
+
+def currents_to_torque(i, k, i0=None, coupling=None, offset=None) -> np.ndarray:
+    """Joint torques from motor currents: ``tau = K^T (k (i - i0)) + offset``, row by row.
+
+    ``i`` (N, m) motor currents (or any raw unit); ``k`` (m,) factors to motor torque on the joint
+    side (torque constant x gear ratio); ``i0`` (m,) current offsets; ``coupling`` ``K`` (m, n):
+    the motor rates are ``K qd``, so the joint torques are ``K^T`` times the motor torques
+    (identity: one motor per joint); ``offset`` (n,) joint torque offsets [N m]."""
+    i = np.asarray(i, float)
+    m = i.shape[1]
+    k = np.broadcast_to(np.asarray(k, float), (m,))
+    i0 = np.zeros(m) if i0 is None else np.broadcast_to(np.asarray(i0, float), (m,))
+    motor = (i - i0[None, :]) * k[None, :]
+    tau = motor if coupling is None else motor @ np.asarray(coupling, float)
+    if offset is not None:
+        tau = tau + np.broadcast_to(np.asarray(offset, float), (tau.shape[1],))[None, :]
+    return tau

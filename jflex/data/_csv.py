@@ -1,0 +1,237 @@
+"""CSV data sets: a log plus the column map case.yaml gives for it, read into the arrays an NPZ
+data set holds (``t``, ``q``, ``tau``, ...); the case loader then checks them like any NPZ.
+
+Only the mapped columns are parsed (a log may carry text columns besides). Each value is the raw
+cell minus its ``offset``, times its ``scale`` factor (e.g. motor current [A] x torque constant x
+gear ratio), in the units ``units`` names (time s, ms, us or ns; angles rad or deg), converted to
+SI here; torques then pass the optional ``coupling`` of the transmission and get their
+``torque_offset``: ``tau = K^T (k (i - i0)) + offset`` (:func:`jflex.data.currents_to_torque`).
+A data set may name several CSV files of one run (positions, velocities, efforts): each holds the
+time column, and they are merged on time (:func:`jflex.data.merge_on_time`).
+"""
+
+from __future__ import annotations
+
+import csv
+import pathlib
+
+import numpy as np
+
+from .._errors import ConfigError, DataError
+from ._condition import merge_on_time
+from ._posture import yaml_posture
+from ._record import Channel, Record
+
+DELIMITERS = {",": ",", ";": ";", "tab": "\t", "space": None}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+
+
+class Table:
+    """The header and the rows (strings) of a CSV file, with each row's line number."""
+
+    def __init__(self, path: pathlib.Path, delimiter: str | None = None, sniff: bool = True):
+        self.path = path
+        try:
+            text = path.read_text(encoding="utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{path}: not UTF-8 text (undecodable byte at offset {exc.start})") from None
+        except OSError as exc:
+            raise DataError(f"{path}: cannot be read ({exc.strerror})") from None
+        lines = [(k + 1, s) for k, s in enumerate(text.splitlines()) if s.strip() and not s.lstrip().startswith("#")]
+        if not lines:
+            raise DataError(f"{path}: no header line (the file is empty or holds only '#' comments)")
+        if sniff and delimiter is None:
+            counts = {d: lines[0][1].count(d) for d in (",", ";", "\t")}
+            best = max(counts, key=counts.get)
+            delimiter = best if counts[best] else None
+        if delimiter is None:
+            cells = [s.split() for _, s in lines]
+        else:
+            cells = list(csv.reader((s for _, s in lines), delimiter=delimiter))
+        self.header = [h.strip() for h in cells[0]]
+        if any(not h for h in self.header):
+            raise DataError(f"{path}: line {lines[0][0]}: the header has an empty column name ({self.header})")
+        dup = sorted({h for h in self.header if self.header.count(h) > 1})
+        if dup:
+            raise DataError(f"{path}: line {lines[0][0]}: column names {dup} appear more than once in the header")
+        self.lines = [k for k, _ in lines[1:]]
+        self.rows = cells[1:]
+        for k, row in zip(self.lines, self.rows):
+            if len(row) != len(self.header):
+                raise DataError(f"{path}: line {k}: {len(row)} fields, the header has {len(self.header)}")
+        if not self.rows:
+            raise DataError(f"{path}: a header but no data lines")
+
+    def column(self, name: str) -> np.ndarray:
+        """The column ``name`` as floats (an empty cell is NaN); a non-number names its line."""
+        i = self.header.index(name)
+        cells = [r[i].strip() or "nan" for r in self.rows]
+        try:
+            return np.asarray(cells, dtype=float)
+        except ValueError:
+            for k, c in zip(self.lines, cells):
+                try:
+                    float(c)
+                except ValueError:
+                    raise DataError(f"{self.path}: column {name!r}, line {k}: expected a number, got {c!r}") from None
+            raise
+
+
+def _tables(paths, spec, case_file, fld):
+    tables = []
+    for p in paths:
+        if not p.is_file():
+            raise ConfigError(f"{case_file}: field '{fld}.file': data file {p} not found")
+        tables.append(Table(p, DELIMITERS[spec.delimiter] if spec.delimiter else None, sniff=spec.delimiter is None))
+    return tables
+
+
+def transmission(motor, order, spec, case_file, fld):
+    """Joint torques (N, n) from the scaled motor torques ``motor`` (columns in joint ``order``):
+    the ``coupling`` matrix of the case applied to the joints it names, then ``torque_offset``."""
+    tau = np.array(motor, float)
+    cp = getattr(spec, "coupling", None)
+    if cp is not None:
+        missing = [j for j in cp.joints if j not in order]
+        if missing:
+            raise ConfigError(f"{case_file}: field '{fld}.coupling.joints': {missing} have no torque column "
+                              f"(torque joints {list(order)})")
+        sel = [list(order).index(j) for j in cp.joints]
+        tau[:, sel] = motor[:, sel] @ np.asarray(cp.matrix, float)
+    off = getattr(spec, "torque_offset", None) or {}
+    for j, v in off.items():
+        if j not in order:
+            raise ConfigError(f"{case_file}: field '{fld}.torque_offset.{j}': {j!r} has no torque column "
+                              f"(torque joints {list(order)})")
+        tau[:, list(order).index(j)] += v
+    return tau
+
+
+def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
+    """The :class:`Record` of the CSV data set ``spec`` (a validated ``datasets[i]`` of case.yaml)
+    read from ``paths`` (one file, or several files of one run merged on time)."""
+    paths = [pathlib.Path(p) for p in (paths if isinstance(paths, (list, tuple)) else [paths])]
+    tables = _tables(paths, spec, case_file, fld)
+    cols, scale, offset, units = spec.columns, spec.scale or {}, getattr(spec, "offset", None) or {}, spec.units
+    pos_unit = units.position if units is not None else "rad"
+    time_unit = units.time if units is not None else "s"
+    ang = np.pi / 180 if pos_unit == "deg" else 1.0
+    names = list(robot.joint_names)
+    header = [h for tb in tables for h in tb.header]
+    label = paths[0].name if len(paths) == 1 else ", ".join(p.name for p in paths)
+
+    mapped = {}  # column -> its field in case.yaml
+    for key in type(cols).model_fields:
+        v = getattr(cols, key)
+        for sub, c in ({None: v} if isinstance(v, str) else (v or {})).items():
+            mapped.setdefault(c, f"{fld}.columns.{key}" + (f".{sub}" if sub else ""))
+    for c, where in mapped.items():
+        if c not in header:
+            raise ConfigError(f"{case_file}: field '{where}': column {c!r} is not in {label} "
+                              f"(its columns: {header})")
+    for key, m in (("scale", scale), ("offset", offset)):
+        for c in m:
+            if c not in mapped:
+                raise ConfigError(f"{case_file}: field '{fld}.{key}.{c}': column {c!r} is not mapped in columns "
+                                  f"(mapped: {sorted(mapped)})")
+    time_col = cols.time if spec.kind != "modal" else None
+
+    def raw(tb, c, finite=True):
+        v = (tb.column(c) - offset.get(c, 0.0)) * scale.get(c, 1.0)
+        bad = ~np.isfinite(v)
+        if finite and bad.any():
+            k = tb.lines[int(np.argmax(bad))]
+            raise DataError(f"{tb.path}: column {c!r} ({mapped[c]}), line {k}: empty or not finite")
+        return v
+
+    finite_ok = {cols.damping_ratio} if spec.kind == "modal" else set()
+    if len(tables) == 1:
+        vals = {c: raw(tables[0], c, c not in finite_ok) for c in mapped}
+        merge_report = None
+    else:
+        if time_col is None:
+            raise ConfigError(f"{case_file}: field '{fld}.file': a {spec.kind} data set is one file")
+        parts = []
+        for tb in tables:
+            if time_col not in tb.header:
+                raise ConfigError(f"{case_file}: field '{fld}.columns.time': column {time_col!r} is not in "
+                                  f"{tb.path.name}: every file of a merged data set holds the time column")
+            own = {c: raw(tb, c) for c in mapped if c in tb.header and c != time_col}
+            parts.append((tb.path.name, raw(tb, time_col) * TIME_UNITS[time_unit], own))
+        t_m, vals, merge_report = merge_on_time(parts, f"{case_file}: {fld}")
+        vals[time_col] = t_m / TIME_UNITS[time_unit]
+
+    def col(c, factor=1.0):
+        return vals[c] * factor
+
+    def block(key, order, factor=1.0):
+        return np.column_stack([col(getattr(cols, key)[j], factor) for j in order])
+
+    def keys_as(key, allowed, what):
+        got = list(getattr(cols, key))
+        for j in got:
+            if j not in allowed:
+                raise ConfigError(f"{case_file}: field '{fld}.columns.{key}.{j}': unknown {what} {j!r}; "
+                                  f"expected one of {list(allowed)}")
+        return got
+
+    channels = {}
+
+    def note(field, j, c, unit):
+        channels[f"{field}:{j}"] = Channel(f"{field}:{j}", unit, f"{label}:{c}", scale.get(c, 1.0), offset.get(c, 0.0))
+
+    conditioning = {"merge": merge_report} if merge_report else {}
+    if spec.kind == "modal":
+        out = yaml_posture(spec, robot, case_file, fld, ang)
+        out.update(freq=col(cols.frequency), zeta=col(cols.damping_ratio))
+        return Record(out, channels, conditioning)
+    t = col(time_col, TIME_UNITS[time_unit])
+    if spec.kind == "torque":
+        pk = list(cols.position)
+        missing = [j for j in names if j not in pk]
+        if missing:
+            raise ConfigError(f"{case_file}: field '{fld}.columns.position': no column for model joints {missing} "
+                              f"(the model has joints {names})")
+        tk = list(cols.torque)
+        if set(tk) == set(pk):
+            torder = pk
+        elif set(tk) == set(names):
+            torder = names if len(pk) != len(names) else pk
+        else:
+            raise ConfigError(f"{case_file}: field '{fld}.columns.torque': expected a column for every model joint "
+                              f"{names} (or for every position joint {pk}), got {tk}")
+        for j in pk:
+            note("q", j, cols.position[j], "rad")
+        for j in torder:
+            note("tau", j, cols.torque[j], "N m")
+        tau = transmission(block("torque", torder), torder, spec, case_file, fld)
+        out = {"t": t, "q": block("position", pk, ang), "tau": tau, "joints": np.asarray(pk)}
+        for key, name in (("velocity", "qd"), ("acceleration", "qdd")):
+            if getattr(cols, key) is not None:
+                if set(getattr(cols, key)) != set(pk):
+                    raise ConfigError(f"{case_file}: field '{fld}.columns.{key}': expected the joints of "
+                                      f"columns.position {pk}, got {list(getattr(cols, key))}")
+                out[name] = block(key, pk, ang)
+        return Record(out, channels, conditioning)
+    # response: applied torques at every model joint, measured channels
+    tk = keys_as("torque", names, "model joint")
+    if set(tk) != set(names):
+        raise ConfigError(f"{case_file}: field '{fld}.columns.torque': expected a column for every model joint "
+                          f"{names}, got {tk}")
+    ch = list(cols.output)
+    out = {"t": t, "tau": transmission(block("torque", names), names, spec, case_file, fld), "channels": np.asarray(ch),
+           "y": np.column_stack([col(cols.output[c], ang if c in names else 1.0) for c in ch])}
+    if spec.q0 is not None:
+        q0 = yaml_posture(spec, robot, case_file, fld, ang)
+        if "joints" in q0:
+            q0["q0"] = q0["q0"][[list(q0.pop("joints")).index(j) for j in names]]
+        out.update(q0)
+    elif not all(j in ch for j in names):
+        raise ConfigError(f"{case_file}: field '{fld}.q0': missing (the outputs do not name every model joint "
+                          f"{names}: the model is simulated from rest at q0)")
+    return Record(out, channels, conditioning)
+
+
+def csv_arrays(path, spec, robot, case_file, fld: str) -> dict:
+    """The NPZ fields of the CSV data set ``spec`` (:func:`read_csv` without the metadata)."""
+    return read_csv(path, spec, robot, case_file, fld).arrays
