@@ -91,18 +91,38 @@ def available_robots() -> list[str]:
     return sorted(names)
 
 
-def load_robot(spec: str | os.PathLike | dict) -> Robot:
+# the most a file name and a path may hold on the usual file systems (NAME_MAX, PATH_MAX): a
+# longer one is refused by name here instead of an OSError from the first stat
+_NAME_MAX, _PATH_MAX = 255, 4096
+
+
+def _checked_spec(s: str, field: str) -> str:
+    """``s`` if it can name a file; else a :class:`ConfigError` naming ``field`` (shortened)."""
+    shown = repr(s) if len(s) <= 80 else repr(s[:60]) + f"... ({len(s)} characters)"
+    if "\x00" in s:
+        raise ConfigError(f"{field}: {shown} contains a NUL byte; expected a robot name or a file path")
+    if len(s) > _PATH_MAX or any(len(part) > _NAME_MAX for part in pathlib.PurePath(s).parts):
+        raise ConfigError(f"{field}: {shown} is too long for a robot name or a file path "
+                          f"(at most {_NAME_MAX} characters a name, {_PATH_MAX} a path)")
+    return s
+
+
+def load_robot(spec: str | os.PathLike | dict, *, within: str | os.PathLike | None = None) -> Robot:
     """A :class:`Robot` from a YAML file, a URDF file, a config name (``"staubli_tx200"``, or
     ``"panda"``/``"ur5"`` when ``example-robot-data`` is installed; ``"panda"`` is the 7-joint arm, its
-    fingers locked closed) or an already-parsed mapping."""
+    fingers locked closed) or an already-parsed mapping.
+
+    ``within``: a folder the files a robot YAML names (its ``urdf:``) must stay inside (a case
+    folder: a YAML there must not read ``/etc/passwd`` or ``../other.urdf``); ``None`` lets them
+    lie anywhere."""
     if isinstance(spec, dict):
-        return robot_from_config(spec, where="<config>")
-    s = str(spec)
+        return robot_from_config(spec, where="<config>", within=within)
+    s = _checked_spec(os.fspath(spec) if isinstance(spec, os.PathLike) else str(spec), "robot")
     path = pathlib.Path(s)
     if path.suffix.lower() == ".urdf":
         return load_urdf(path)
     if path.suffix.lower() in (".yaml", ".yml"):
-        return robot_from_config(load_yaml(path), where=str(path), base=path.parent)
+        return robot_from_config(load_yaml(path), where=str(path), base=path.parent, within=within)
     for d in config_dirs():
         cand = d / f"{s}.yaml"
         if cand.is_file():
@@ -110,7 +130,25 @@ def load_robot(spec: str | os.PathLike | dict) -> Robot:
     urdf = _example_robot_urdf(s)
     if urdf is not None:
         return load_urdf(urdf, lock=_EXAMPLE_LOCKS.get(s))
+    extra = _missing_extra(s)
+    if extra:
+        raise ConfigError(extra)
     raise ConfigError(f"unknown robot '{s}': not a .yaml/.urdf path, and not one of {available_robots()}")
+
+
+def _missing_extra(name: str) -> str | None:
+    """What to install for a robot name jflex knows but cannot load here (``None``: not one)."""
+    if name not in ("panda", "ur5"):
+        return None
+    try:
+        import importlib.metadata as md
+
+        md.distribution("example-robot-data")
+    except Exception:  # noqa: BLE001 - any failure to find it means it is not usable here
+        return (f"robot '{name}' comes from the example-robot-data package, which is not installed: "
+                f'pip install "jflex[robots]" (or pip install example-robot-data)')
+    return (f"robot '{name}': example-robot-data is installed but its {name} URDF was not found in it; "
+            'reinstall it (pip install --force-reinstall example-robot-data)')
 
 
 def _numbers(value: Any, where: str, shape=None) -> np.ndarray:
@@ -132,10 +170,13 @@ def _angle_unit(cfg, where, default="rad"):
     return np.pi / 180.0 if unit == "deg" else 1.0
 
 
-def robot_from_config(cfg: dict, where: str = "<config>", base: pathlib.Path | None = None) -> Robot:
-    """Validate a robot config mapping and build the :class:`Robot` (see module docstring)."""
+def robot_from_config(cfg: dict, where: str = "<config>", base: pathlib.Path | None = None,
+                      within: str | os.PathLike | None = None) -> Robot:
+    """Validate a robot config mapping and build the :class:`Robot` (see module docstring).
+    ``base``: the folder relative paths start from; ``within``: a folder every path the config
+    names must stay inside (see :func:`load_robot`)."""
     try:
-        return _robot_from_config(cfg, where, base)
+        return _robot_from_config(cfg, where, base, within)
     except JFlexError:
         raise
     except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
@@ -143,7 +184,34 @@ def robot_from_config(cfg: dict, where: str = "<config>", base: pathlib.Path | N
         raise ConfigError(f"{where}: invalid robot config ({type(exc).__name__}: {exc})") from None
 
 
-def _robot_from_config(cfg, where, base):
+def _confined(path: pathlib.Path, given: str, within, field: str) -> pathlib.Path:
+    """``path`` if it lies inside ``within`` (symbolic links resolved), else a ConfigError."""
+    if within is None:
+        return path
+    root = pathlib.Path(within).resolve()
+    hint = "a robot file inside a case names files inside the case folder (pass allow_outside=True to read it)"
+    if pathlib.PurePath(given).is_absolute():
+        raise ConfigError(f"{field}: absolute path {given!r} leaves {root}: {hint}")
+    if not path.resolve().is_relative_to(root):
+        raise ConfigError(f"{field}: {given!r} resolves outside {root}: {hint}")
+    return path
+
+
+def _names(value, field: str) -> list[str] | None:
+    """A list of distinct strings (joint names), or a ConfigError naming ``field``."""
+    if value is None:
+        return None
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"{field}: expected a list of joint names (strings), got {value!r}")
+    seen = set()
+    for v in value:
+        if v in seen:
+            raise ConfigError(f"{field}: joint {v!r} is listed twice; each joint once")
+        seen.add(v)
+    return value
+
+
+def _robot_from_config(cfg, where, base, within=None):
     if not isinstance(cfg, dict):
         raise ConfigError(f"{where}: expected a mapping, got {type(cfg).__name__}")
     known = {"name", "source", "notes", "dh", "urdf", "lock", "joints", "joint_names", "limits", "links", "gravity", "units"}
@@ -156,10 +224,13 @@ def _robot_from_config(cfg, where, base):
     if "urdf" in cfg:
         if not isinstance(cfg["urdf"], str):
             raise ConfigError(f"{where}.urdf: expected a file path, got {cfg['urdf']!r}")
-        path = pathlib.Path(cfg["urdf"])
+        given = _checked_spec(cfg["urdf"], f"{where}.urdf")
+        path = pathlib.Path(given)
         if not path.is_absolute() and base is not None:
             path = base / path
-        return load_urdf(path, gravity=gravity, lock=cfg.get("lock"), joints=cfg.get("joints"))
+        path = _confined(path, given, within, f"{where}.urdf")
+        joints = _names(cfg.get("joints"), f"{where}.joints")
+        return load_urdf(path, gravity=gravity, lock=cfg.get("lock"), joints=joints)
     for key in ("lock", "joints"):
         if key in cfg:
             raise ConfigError(f"{where}.{key}: only a 'urdf' robot can lock joints (a DH table has no fixed joints)")
@@ -199,6 +270,7 @@ def _robot_from_config(cfg, where, base):
     names = cfg.get("joint_names")
     if names is not None and (not isinstance(names, list) or len(names) != n or not all(isinstance(s, str) for s in names)):
         raise ConfigError(f"{where}.joint_names: expected a list of {n} strings, got {names!r}")
+    _names(names, f"{where}.joint_names")
     links = cfg.get("links")
     if links is not None:
         if not isinstance(links, list) or len(links) != n:

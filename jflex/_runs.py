@@ -152,12 +152,18 @@ _Loader.add_implicit_resolver(
 def load_yaml(path: str | os.PathLike) -> dict:
     """Read a YAML mapping; a missing file or a non-mapping top level is a :class:`ConfigError`."""
     path = pathlib.Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: config file not found")
     try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_Loader)
+        if not path.is_file():
+            raise ConfigError(f"{path}: config file not found")
+        text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (undecodable byte at offset {exc.start})") from None
+    except (OSError, ValueError) as exc:  # a name too long, a NUL byte, no permission
+        shown = str(path) if len(str(path)) <= 120 else str(path)[:100] + f"... ({len(str(path))} characters)"
+        why = "contains a NUL byte" if "\x00" in str(path) else (exc.strerror or type(exc).__name__) if isinstance(exc, OSError) else str(exc)
+        raise ConfigError(f"{shown!r}: cannot read this config file ({why})") from None
+    try:
+        data = yaml.load(text, Loader=_Loader)
     except _Refused as exc:
         raise ConfigError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
