@@ -93,7 +93,9 @@ class AsymmetricCoulomb(AbstractLinearEffect):
     units = ("N m", "N m")
     candidate = CandidateInfo(
         name="asymmetric_coulomb", build=lambda joints, hyper: AsymmetricCoulomb(joints, 1.0, 1.0, SMOOTH_SIGN),
-        placements=_every_joint, signature="sign of velocity, a different level in each direction")
+        placements=_every_joint, signature="sign of velocity, a different level in each direction",
+        # beside a nominal symmetric Coulomb law it adds a constant alone: the torque offset's candidate
+        subsumed_by="coulomb_friction")
 
     def __init__(self, joints, positive=0.0, negative=0.0, smoothing=1e-3):
         self.joints = tuple(joints)

@@ -68,6 +68,8 @@ class CandidateInfo(NamedTuple):
     - ``hyper``: ``(grid, label, default)`` of a nonlinear parameter searched on a grid, else None.
     - ``nonnegative``: whether its coefficients are bounded below by zero (friction levels, inertias).
     - ``size``: joints per placement.
+    - ``subsumed_by``: a law whose presence in the nominal model at the same joint leaves this one
+      nothing of its own beyond another candidate (not tried there), else None.
     """
 
     name: str
@@ -78,6 +80,7 @@ class CandidateInfo(NamedTuple):
     hyper: tuple | None = None
     nonnegative: bool = True
     size: int = 1
+    subsumed_by: str | None = None
 
 
 _REGISTRY: dict = {}  # candidate name -> effect class

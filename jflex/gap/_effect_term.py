@@ -163,6 +163,11 @@ class EffectTerm(TorqueTerm):
         m = self.bound.spec.apply(self.bound.model, jnp.asarray(theta, float), physical=True)
         parts.extra += list(m.effects)
 
+    def implausible(self, theta, sets):
+        from ._torque_terms import torque_share_implausible  # the generic range: a user's law declares none
+
+        return torque_share_implausible(self, theta, sets)
+
 
 # --- the built-in torque-side laws, read off jflex.effects ------------------------------------------
 COULOMB_LIMIT = 1e-6  # [rad/s] a Stribeck velocity this small leaves the Coulomb level alone

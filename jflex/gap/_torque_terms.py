@@ -23,9 +23,9 @@ import numpy as np
 
 from .._dynamics import _rnea
 from ..identify._signal import motion_band, zero_phase_lowpass
-from ..effects._linear import CandidateInfo, DataScale, on_register, registered_candidates
+from ..effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
 from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
-from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, predict
+from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, predict, term_columns
 
 # [s] grid of sensor delays, of either sign: the torque lagging the angles (d > 0), or the encoders
 # lagging the torque (d < 0: a position read by a slower bus, or stamped at the end of a cycle)
@@ -52,6 +52,55 @@ def play(x, b):
 
 
 BACKLASH_B = (0.003, 0.005, 0.0075, 0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03)  # [rad] grid of backlash half-widths
+
+
+# --- plausible ranges: a fitted value no machine has is reported, not named ---------------------------
+PLAY_PLAUSIBLE = 0.02  # [rad] half-width of a gear's play: a few mrad (worn spur gears reach ~1 degree)
+DEFLECTION_PLAUSIBLE = 0.05  # [rad] a transmission's deflection under the largest measured torque
+
+
+def out_of_range(name: str, value: float, lo: float, hi: float, unit: str = "", why: str = "") -> str | None:
+    """The sentence a fitted value outside ``[lo, hi]`` is reported with (None inside)."""
+    if lo <= value <= hi:
+        return None
+    u = f" {unit}" if unit else ""
+    return f"{name} = {value:.4g}{u} lies outside the plausible range [{lo:.4g}, {hi:.4g}]{u}" + (f" ({why})" if why else "")
+
+
+def torque_share_implausible(term, theta, sets) -> str | None:
+    """The generic range of a term's coefficients: the torque it accounts for at each joint (rms)
+    at most ``TORQUE_FRACTION`` x the measured torque's rms there (an effect that needs more torque
+    than the joint ever showed cancels another term rather than describing the machine)."""
+    if not term.n_params or not sets:
+        return None
+    theta = np.asarray(theta, float)
+    num = sum(np.sum((term_columns(term, s) @ theta) ** 2, axis=0) for s in sets)
+    den = sum(np.sum(s.tau**2, axis=0) for s in sets)
+    rows = sum(s.tau.shape[0] for s in sets)
+    r, lim = np.sqrt(num / rows), TORQUE_FRACTION * np.sqrt(den / rows)
+    j = int(np.argmax(r / np.maximum(lim, 1e-300)))
+    if r[j] <= lim[j]:
+        return None
+    names = sets[0].robot.joint_names
+    vals = ", ".join(f"{k} = {v:.4g}" for k, v in term.parameters(theta).items())
+    return (f"its torque at {names[j]} ({r[j]:.4g} N m rms) exceeds {TORQUE_FRACTION:g} x the measured torque's rms there "
+            f"({lim[j] / TORQUE_FRACTION:.4g} N m), with {vals}")
+
+
+def _law_ranges(name, j, sc):
+    """Per coefficient of the built-in family ``name`` at joint ``j``: ``(low, high)`` given the data's scale."""
+    lvl = TORQUE_FRACTION * sc.tau_rms[j]
+    if name == "viscous_friction":
+        return [(0.0, TORQUE_FRACTION * sc.tau_std[j] / max(sc.qd_std[j], 1e-12))]
+    if name == "coulomb_friction":
+        return [(0.0, lvl)]
+    if name == "stribeck_friction":
+        return [(0.0, lvl), (0.0, lvl)]
+    if name == "rotor_inertia":
+        return [(0.0, TORQUE_FRACTION * sc.tau_std[j] / max(sc.qdd_std[j], 1e-12))]
+    if name == "gravity_compensator":
+        return [(-lvl, lvl)] * 4
+    return None
 
 
 # --- laws of jflex.effects ---------------------------------------------------------------------------
@@ -94,6 +143,18 @@ class LawTerm(TorqueTerm):
         if self.meta.hyper is not None:
             out[self.meta.hyper[2]] = float(self.hyper)
         return out
+
+    def implausible(self, theta, sets):
+        if not sets:
+            return None
+        ranges = None if self.joint is None else _law_ranges(self.effect, self.joint, data_scale(sets))
+        if ranges is None:
+            return torque_share_implausible(self, theta, sets)
+        for nm, v, (lo, hi) in zip(self.param_names(), np.asarray(theta, float), ranges):
+            msg = out_of_range(nm, float(v), lo, hi, why=f"{TORQUE_FRACTION:g} x the measured torque's spread")
+            if msg:
+                return msg
+        return None
 
     def search(self, base_terms, base_delay, sets, inertia=None):
         if self.meta.hyper is None:
@@ -168,6 +229,15 @@ class CompliantJoint(TorqueTerm):
 
     def columns(self, s):
         return compliance_column(s, self.joint)[:, :, None]
+
+    def implausible(self, theta, sets):
+        return _compliance_implausible(float(theta[0]), self.joint, sets)
+
+
+def _compliance_implausible(c, j, sets):
+    tmax = max(float(np.abs(s.tau[:, j]).max()) for s in sets) if sets else 0.0
+    return out_of_range("compliance 1/k", c, 0.0, DEFLECTION_PLAUSIBLE / max(tmax, 1e-12), "rad/(N m)",
+                        f"a deflection of at most {DEFLECTION_PLAUSIBLE:g} rad under the largest measured torque")
 
 
 # --- play in the gear ------------------------------------------------------------------------------
@@ -256,6 +326,10 @@ class Play(TorqueTerm):
         out["b [rad]"], out["engagement [s]"] = backlash_hyper(self.hyper)
         return out
 
+    def implausible(self, theta, sets):
+        return out_of_range("play half-width b", backlash_hyper(self.hyper)[0], 0.0, PLAY_PLAUSIBLE, "rad",
+                            "a gear's play is a few mrad")
+
     def search(self, base_terms, base_delay, sets, inertia=None):
         rows = sum(s.tau.size for s in sets)
         bic = lambda f: rows * np.log(max(f.cost, 1e-300)) + f.terms[-1].n_params * np.log(rows)
@@ -280,6 +354,10 @@ class LoadedPlay(Play):
         out = TorqueTerm.parameters(self, theta)
         out["sign width [x std(tau)]"] = float(self.hyper[1])
         return out
+
+    def implausible(self, theta, sets):
+        return (out_of_range("play half-width b", float(theta[1]), 0.0, PLAY_PLAUSIBLE, "rad", "a gear's play is a few mrad")
+                or _compliance_implausible(float(theta[0]), self.joint, sets))
 
 
 def backlash(joint, hyper=None) -> Play:
@@ -334,6 +412,10 @@ class SensorDelay(TorqueTerm):
 
     def parameters(self, theta):
         return {"delay [s]": float(self.hyper)}
+
+    def implausible(self, theta, sets):
+        return out_of_range("delay", float(self.hyper), -DELAY_PLAUSIBLE, DELAY_PLAUSIBLE, "s",
+                            "a sensor's delay is a few samples to tens of milliseconds")
 
     def search(self, base_terms, base_delay, sets, inertia=None):
         base = tuple(t for t in base_terms if not isinstance(t, SensorDelay))  # one delay, refitted from scratch
@@ -499,8 +581,8 @@ def _registered(cls) -> None:
         return RegisteredTerm(info.name, joint, info.hyper[2] if hyper is None and info.hyper is not None else hyper)
 
     proto = RegisteredTerm(info.name, 0, None if info.hyper is None else info.hyper[2])
-    KINDS[info.name] = Kind(make, proto.n_params + int(info.hyper is not None), signature=info.signature,
-                            placements=lambda n: [g[0] for g in info.placements(n)])
+    KINDS[info.name] = Kind(make, proto.n_params + int(info.hyper is not None), subsumed_by=info.subsumed_by,
+                            signature=info.signature, placements=lambda n: [g[0] for g in info.placements(n)])
 
 
 on_register(_registered)

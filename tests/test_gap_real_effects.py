@@ -1,0 +1,128 @@
+"""Real robots' effects as gap candidates: an effect class that registers itself
+(jflex.effects.register_candidate) is tried by the diagnosis with no line in jflex.gap; a sensor
+delay of either sign; plausible ranges. The diagnosis cases are made by independent code
+(Pinocchio + NumPy, tests/_real_effects_cases.py): the planted effect is found and named, and one
+planted outside its plausible range is reported implausible and not named."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jflex
+from jflex import effects as E
+from jflex.effects import _linear as EL
+from jflex.gap import _torque as T
+from jflex.gap import _torque_terms as TT
+
+pytest.importorskip("pinocchio")
+import _real_effects_cases as G  # noqa: E402
+
+
+def test_builtin_real_effects_are_registered_candidates():
+    for name, cls in (("torque_offset", E.TorqueOffset), ("asymmetric_coulomb", E.AsymmetricCoulomb),
+                      ("coupled_drive", E.CoupledDrive)):
+        assert E.registered_candidates()[name] is cls and name in TT.KINDS
+    # a coupled drive is tried at the adjacent pairs of the wrist (the last three joints) only
+    assert list(TT.KINDS["coupled_drive"].joints(6)) == [3, 4]
+    assert list(TT.KINDS["torque_offset"].joints(6)) == list(range(6))
+
+
+class _Cogging(E.AbstractLinearEffect):
+    """A user's law: ``tau = A sin(3 q)`` (a toy cogging torque), linear in A."""
+
+    amplitude: jnp.ndarray
+    joints: tuple = eqx.field(static=True)
+    linear_leaves = ("amplitude",)
+    units = ("N m",)
+    candidate = E.CandidateInfo(name="toy_cogging", build=lambda joints, hyper: _Cogging(joints, 1.0),
+                                placements=lambda n: tuple((j,) for j in range(n)))
+
+    def __init__(self, joints, amplitude):
+        self.joints = tuple(joints)
+        self.amplitude = jnp.broadcast_to(jnp.asarray(amplitude, float), (len(self.joints),))
+
+    def potential_energy(self, robot, slots, x):
+        from jflex.effects._base import joint_indices
+
+        q = x[jnp.array(joint_indices(robot, self.joints, "toy"))]
+        return -jnp.sum(self.amplitude * jnp.cos(3 * q)) / 3  # dV/dq = A sin(3 q)
+
+    def plausible_ranges(self, robot, scale):
+        return [(-1.0, 1.0)] * len(self.joints)
+
+
+def test_a_users_registered_effect_becomes_a_candidate_without_gap_code():
+    robot = jflex.make_robot(joint_names=["a", "b"], link_names=["l1", "l2"], parents=[-1, 0],
+                             joint_types=["revolute", "revolute"], placement_R=np.stack([np.eye(3)] * 2),
+                             placement_p=np.zeros((2, 3)), axis=[[0, 0, 1], [0, 0, 1]],
+                             inertia=np.stack([np.r_[1.0, np.zeros(9)]] * 2))
+    E.register_candidate(_Cogging)
+    try:
+        assert "toy_cogging" in TT.KINDS
+        term = TT.make_term("toy_cogging", 1)
+        t = np.linspace(0, 1, 50)
+        q = np.stack([np.sin(t), np.cos(2 * t)], axis=1)
+        s = T.TorqueSet(name="s", t=t, q=q, qd=q * 0, qdd=q * 0, tau=q, F0=q, scale=np.ones(2), Y=np.zeros((50, 2, 20)),
+                        q_extra=np.zeros((50, 0)), extra_joints=(), robot=robot)
+        cols = term.columns(s)
+        assert cols.shape == (50, 2, 1)
+        np.testing.assert_allclose(cols[:, 1, 0], np.sin(3 * q[:, 1]), atol=1e-12)
+        np.testing.assert_allclose(cols[:, 0, 0], 0.0, atol=1e-15)
+        assert "amplitude = 1.5" in term.implausible(np.array([1.5]), [s])
+    finally:
+        EL._REGISTRY.pop("toy_cogging", None)
+        TT.KINDS.pop("toy_cogging", None)
+
+
+def test_shift_of_either_sign_against_the_closed_form():
+    t = np.arange(0, 2, 0.001)
+    X = np.stack([np.sin(3 * t), np.cos(5 * t)], axis=1)
+    for d in (0.0123, -0.0123):
+        Y = T.shift(X, t, d)
+        inner = (t > 0.05) & (t < 1.95)
+        np.testing.assert_allclose(Y[inner], np.stack([np.sin(3 * (t - d)), np.cos(5 * (t - d))], axis=1)[inner], atol=2e-5)
+    assert min(TT.DELAYS) < 0 < max(TT.DELAYS)
+
+
+def _diagnose(tmp_path, **kw):
+    folder, truth = G.make(tmp_path / "case", **kw)
+    return jflex.gap.diagnose(folder, prune=3, max_effects=1).result, truth
+
+
+def _named(res):
+    return [(e["effect"], e["joint"]) for e in res["selected"]]
+
+
+def test_negative_sensor_delay_is_found(tmp_path):
+    # the encoders lag the torque by 12 ms (the torque channel leads)
+    res, truth = _diagnose(tmp_path, robot="arm3", delay=-0.012)
+    assert _named(res) == [("sensor_delay", None)]
+    assert res["parameters"]["torque"]["sensor_delay"]["delay [s]"] == pytest.approx(-0.012, abs=0.0015)
+    assert not res["selected"][0].get("implausible")
+
+
+def test_a_delay_outside_the_plausible_range_is_reported_not_named(tmp_path):
+    res, truth = _diagnose(tmp_path, robot="arm3", delay=-0.058)
+    assert "sensor_delay" not in [e for e, _ in _named(res)]
+    entry = next(e for e in res["ranking"] if e["effect"] == "sensor_delay")
+    assert "delay" in entry["implausible"] and "-0.05" in entry["implausible"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", ["torque_offset", "asymmetric_coulomb"])
+def test_planted_joint_effect_is_found_and_named(tmp_path, effect):
+    res, truth = _diagnose(tmp_path, robot="arm3", effect=effect)
+    j = truth["joint_names"][truth["params"]["joint"]]
+    assert _named(res) == [(effect, j)]
+    assert res["verdict"] == "explained"
+
+
+@pytest.mark.slow
+def test_coupled_wrist_drive_of_a_six_joint_arm_is_found_and_named(tmp_path):
+    res, truth = _diagnose(tmp_path, robot="ur5", effect="coupled_drive")
+    a, b = (truth["joint_names"][k] for k in truth["params"]["joints"])
+    assert _named(res) == [("coupled_drive", a)]
+    fitted = res["parameters"]["torque"][f"coupled_drive@{a}+{b}"]
+    assert fitted["coupling ratio"] == 1.0
+    assert fitted["motor1.inertia [kg m^2]"] == pytest.approx(truth["params"]["Ia"], rel=0.25)
