@@ -1,4 +1,5 @@
-"""Seed 003's rigid dynamics in terms of its identified base parameters (thesis, Appendix B).
+"""Rigid dynamics of two machining robots in terms of their identified base parameters, as the
+MASc thesis "Posture Dependent Dynamics in Robotic Machining" gives them (its Appendix B; "the thesis" below).
 
 The thesis gives M(q) and G(q) of the Staubli TX200 and Kuka KR90 (3 positioning joints) as a
 regressor ``Phi(q, qdd)`` times 15 base parameters. ``realisation_matrix`` finds link inertial
@@ -75,7 +76,7 @@ def realisation_matrix(robot, a1, a2, n_samples=60, seed=0):
 
 
 class Seed003Robot:
-    """One seed-003 robot (Staubli TX200 or Kuka KR90, 3 positioning joints) as the thesis models
+    """One robot of the thesis (Staubli TX200 or Kuka KR90, 3 positioning joints) as the thesis models
     it: DH kinematics, rigid dynamics from the 27 identified base parameters (Tables 3.3/3.6),
     flexible joints with the stiffness and damping of Tables 4.3/4.4, rotors, the gravity
     compensator of joint 2, and the EMA postures (Tables 4.1/4.2) with the thesis' tables.

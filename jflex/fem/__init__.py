@@ -1,4 +1,7 @@
-"""Planar finite elements for linkages and kineto-elastodynamics (the high-speed press of seed 002).
+"""Planar finite elements for linkages and kineto-elastodynamics.
+
+"The press paper" in this package is "Elastic dynamic research of high-speed multi-link precision press considering structural stiffness of rotation joints"
+(a high-speed multi-link press; equation and section numbers refer to it).
 
 Beam elements with axial stretch, bar elements for joint stiffness, lumped masses and assembly
 by connectivity; modes, Rayleigh and modal damping; rigid-body motion of closed-loop linkages

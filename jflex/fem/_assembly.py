@@ -1,4 +1,4 @@
-"""Assembly of planar finite-element models by connectivity (seed 002 Eqs. 13-22), damping and modes.
+"""Assembly of planar finite-element models by connectivity (press paper, Eqs. 13-22), damping and modes.
 
 A node carries three DOF slots ``(ux, uy, th)``; ``node_dofs`` maps each slot to a global DOF
 index, or to -1 where the slot is held fixed. Two nodes of different links at one pin share
@@ -185,7 +185,7 @@ def fe_model(
 
 
 class Modes(eqx.Module):
-    """Mass-normalised modes of ``K phi = w^2 M phi`` (seed 002 Eqs. 24-28): ``Phi^T M Phi = I``."""
+    """Mass-normalised modes of ``K phi = w^2 M phi`` (press paper, Eqs. 24-28): ``Phi^T M Phi = I``."""
 
     omega: Float[Array, " r"]
     """Natural angular frequencies, rad/s, ascending."""
@@ -220,7 +220,7 @@ def modes(M: Float[ArrayLike, "n n"], K: Float[ArrayLike, "n n"], n_modes: int |
 
 
 def rayleigh_damping(M: ArrayLike, K: ArrayLike, alpha: ArrayLike, beta: ArrayLike) -> Array:
-    """Rayleigh damping ``C = alpha M + beta K`` (seed 002 Eq. 33).
+    """Rayleigh damping ``C = alpha M + beta K`` (press paper, Eq. 33).
 
     **Arguments:** `M`, `K` (n, n); `alpha` in 1/s, `beta` in s.
 

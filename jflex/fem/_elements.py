@@ -1,7 +1,7 @@
 """Planar finite elements: Euler-Bernoulli beams with axial stretch, bars, and their rotation.
 
 Local beam DOFs are ``(u1, v1, th1, u2, v2, th2)``: axial and transverse translation and the
-in-plane rotation at each node (seed 002 Eq. 1: linear axial, cubic transverse field).
+in-plane rotation at each node (press paper, Eq. 1: linear axial, cubic transverse field).
 Global DOFs per node are ``(ux, uy, th)`` in the inertial frame.
 """
 
@@ -84,7 +84,7 @@ def beam_matrices(
     - `E, A, I, rho`: modulus (Pa), area (m^2), second moment (m^4), density (kg/m^3).
     - `xi, xj`: node positions, shape (2,), m.
 
-    **Returns:** ``(K, M)``, each (6, 6) on ``(ux_i, uy_i, th_i, ux_j, uy_j, th_j)`` (seed 002 Eqs. 8-9).
+    **Returns:** ``(K, M)``, each (6, 6) on ``(ux_i, uy_i, th_i, ux_j, uy_j, th_j)`` (press paper, Eqs. 8-9).
     """
     d = jnp.asarray(xj) - jnp.asarray(xi)
     L = jnp.sqrt(d @ d)
@@ -100,7 +100,7 @@ def bar_matrices(
     """Global stiffness and consistent mass of a two-node bar (axial stiffness only).
 
     The bar's axis direction and length are arguments rather than node geometry, because the
-    bars that stand for a rotation joint (seed 002 Sec. 2.3) join nodes that coincide: their
+    bars that stand for a rotation joint (press paper, Sec. 2.3) join nodes that coincide: their
     length is the journal radius ``R`` and their direction the joint's load axis.
 
     **Arguments:**
@@ -108,7 +108,7 @@ def bar_matrices(
     - `E`: (equivalent) modulus, Pa.
     - `A`: area, m^2.
     - `L`: length, m.
-    - `rho`: density, kg/m^3 (0 when the joint's mass is lumped on a node, as in seed 002).
+    - `rho`: density, kg/m^3 (0 when the joint's mass is lumped on a node, as in the press paper).
     - `angle`: direction of the axis from node i to node j, rad.
 
     **Returns:** ``(K, M)``, each (4, 4) on ``(ux_i, uy_i, ux_j, uy_j)``.
@@ -122,7 +122,7 @@ def bar_matrices(
 
 
 def bimodular_modulus(axial_force: ArrayLike, E_tension: ArrayLike, E_compression: ArrayLike) -> Array:
-    """Equivalent modulus of a joint bar that differs in tension and compression (seed 002, Sec. 2.3.2).
+    """Equivalent modulus of a joint bar that differs in tension and compression (press paper, Sec. 2.3.2).
 
     **Arguments:**
 

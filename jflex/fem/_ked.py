@@ -1,8 +1,8 @@
 """Kineto-elastodynamics (KED): elastic response of a linkage to the inertial loads of its rigid motion.
 
 Over a crank revolution the linkage takes ``n`` poses; at pose ``i`` the elastic model has mass
-``M_i``, stiffness ``K_i`` and load ``F_i = -M_i Uddot_r,i`` (seed 002 Eqs. 20, 23). Within the
-time unit ``[t_i, t_{i+1}]`` the system is frozen at its start pose (seed 002 Sec. 3.4) and each
+``M_i``, stiffness ``K_i`` and load ``F_i = -M_i Uddot_r,i`` (press paper, Eqs. 20, 23). Within the
+time unit ``[t_i, t_{i+1}]`` the system is frozen at its start pose (press paper, Sec. 3.4) and each
 mode's equation (Eq. 39) is integrated exactly for a load varying linearly over the unit.
 Where the paper carries each modal coordinate unchanged from one unit to the next, the state is
 carried in physical coordinates here (``eta_new = Phi_new^T M_new Phi_old eta_old``), so mode
@@ -38,7 +38,7 @@ class AbstractDamping(eqx.Module):
 
 
 class ModalDamping(AbstractDamping):
-    """The same damping ratio in every mode (seed 002 Eq. 35, ``zeta = 0.05``)."""
+    """The same damping ratio in every mode (press paper, Eq. 35, ``zeta = 0.05``)."""
 
     zeta: Float[Array, ""]
 
@@ -52,7 +52,7 @@ class ModalDamping(AbstractDamping):
 
 
 class RayleighDamping(AbstractDamping):
-    """``C = alpha M + beta K`` (seed 002 Eq. 33): ``zeta(w) = alpha/(2w) + beta w/2``."""
+    """``C = alpha M + beta K`` (press paper, Eq. 33): ``zeta(w) = alpha/(2w) + beta w/2``."""
 
     alpha: Float[Array, ""]
     beta: Float[Array, ""]
@@ -162,7 +162,7 @@ def _ked_periodic(
     pose_modes_: Modes | None = None,
     static_correction: bool = False,
 ) -> KEDResponse:
-    """Periodic steady-state elastic response by modal superposition (seed 002 Eqs. 38-44).
+    """Periodic steady-state elastic response by modal superposition (press paper, Eqs. 38-44).
 
     **Arguments:**
 

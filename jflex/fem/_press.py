@@ -1,4 +1,5 @@
-"""The high-speed multi-link press of seed 002 (Fig. 1) as a linkage and as a finite-element model.
+"""The high-speed multi-link press (its Fig. 1) of the paper "Elastic dynamic research of high-speed multi-link precision press considering structural stiffness of rotation joints"
+(the press paper below) as a linkage and as a finite-element model.
 
 Topology (right side; the left side mirrors it about the slider axis x = 0)::
 
@@ -6,7 +7,7 @@ Topology (right side; the left side mirrors it about the slider axis x = 0)::
     m1 --pin D--  toggle L3 (D -> S)  --pin S--  rocker = oscillating arm L6 (S -> Q) + upper link L4 (Q -> A)
     rocker --frame pin A--   rocker --pin Q--  lower link L5 (Q -> M)  --pin M--  main slider m2
 
-Seed 002's text connects L4 to L6 by a pin; with that pin the frame-L4-L6-L3-m1 loop is a
+The press paper's text connects L4 to L6 by a pin; with that pin the frame-L4-L6-L3-m1 loop is a
 four-bar whose coupler L6 keeps a free degree of freedom, which a press cannot have. L4 and L6
 are therefore taken as one rigid rocker (welded at Q): L4 carries the press load from Q to the
 frame pin A, L6 is the arm the toggle drives. At BDC the knee Q lies straight below A
@@ -152,7 +153,7 @@ def press_from_config(cfg: Mapping) -> PressGeometry:
         thick.append(_num(secs[s], "thickness", f"press.sections.{s}"))
     bdc = float(p.get("bdc_crank_angle_deg", 90.0))
     if abs(bdc - 90.0) > 1e-12:
-        raise ConfigError("press.bdc_crank_angle_deg: only 90 (seed 002's convention) is supported")
+        raise ConfigError("press.bdc_crank_angle_deg: only 90 (the press paper's convention) is supported")
     n_el = p.get("elements_per_link", 3)
     if not isinstance(n_el, int) or n_el < 1:
         raise ConfigError(f"press.elements_per_link: expected an integer >= 1, got {n_el!r}")
@@ -286,7 +287,7 @@ def press_fe(geo: PressGeometry, variant: str) -> PressFE:
     """Finite-element model of the press: ``variant`` is ``"perfect"`` or ``"joints"``.
 
     ``"perfect"``: the links' nodes at a pin share their translations (rotations independent).
-    ``"joints"``: each pin is four bar elements between the links' nodes (seed 002 Sec. 2.3).
+    ``"joints"``: each pin is four bar elements between the links' nodes (press paper, Sec. 2.3).
     Frame pins, the crank's input rotation and the sliders' guides (horizontal translation and
     rotation of their centres) are held.
     """
