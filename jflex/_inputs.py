@@ -101,9 +101,10 @@ class Step(AbstractInput):
 
 
 def Brake(torque, t0, t1=jnp.inf) -> Step:
-    """A braking torque/force applied from ``t0`` (as the mechanical brake in "Analytical and experimental investigation of the dynamic
-    behavior of a revolute-prismatic manipulator with N flexible links and hubs": the mechanical brake of the revolute
-    joint, modelled as an equivalent negative torque). Same as :class:`Step`."""
+    """A braking torque/force applied from ``t0``: the mechanical brake of a revolute joint modelled
+    as an equivalent negative torque, as in "Analytical and experimental investigation of the
+    dynamic behavior of a revolute-prismatic manipulator with N flexible links and hubs". Same as
+    :class:`Step`."""
     return Step(torque, t0, t1)
 
 
