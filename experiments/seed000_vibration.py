@@ -51,6 +51,10 @@ def free_closed_form(m, k, c, x0, v0, t):
     return A * np.exp(s1 * t) + (x0 - A) * np.exp(s2 * t)
 
 
+def _stage(text):
+    print(f"seed000_vibration: {text}", file=sys.stderr, flush=True)
+
+
 def run(cfg, out):
     m, k = float(cfg["mass_kg"]), float(cfg["stiffness_N_per_m"])
     wn = np.sqrt(k / m)
@@ -59,6 +63,7 @@ def run(cfg, out):
     res = {"natural_frequency_rad_per_s": wn, "free": []}
 
     fig, ax = plt.subplots(1, 3, figsize=(15, 4))
+    _stage(f"free responses ({len(cfg['damping_ratios'])} damping ratios)")
     for z in cfg["damping_ratios"]:
         c = 2 * z * np.sqrt(k * m)
         r = jflex.simulate(oscillator(m, k, c), ts, x0=[cfg["x0_m"]], xd0=[cfg["v0_m_per_s"]], outputs=("s",), **tol)
@@ -74,6 +79,7 @@ def run(cfg, out):
     z, F = float(fc["damping_ratio"]), float(fc["force_N"])
     c = 2 * z * np.sqrt(k * m)
     rows = []
+    _stage(f"forced steady states ({len(fc['frequency_ratios'])} frequencies)")
     for ratio in fc["frequency_ratios"]:
         w = ratio * wn
         T = 2 * np.pi / w
@@ -97,6 +103,7 @@ def run(cfg, out):
     ax[1].set(xlabel="omega / omega_n", ylabel="X k / F", yscale="log", title=f"forced, zeta = {z}")
     ax[1].legend()
 
+    _stage("half-sine pulse against the Duhamel integral")
     dc = cfg["duhamel"]
     z, P0, tp = float(dc["damping_ratio"]), float(dc["pulse_N"]), float(dc["pulse_duration_s"])
     c = 2 * z * np.sqrt(k * m)

@@ -14,6 +14,7 @@ import math
 import os
 import pathlib
 import re
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -202,6 +203,9 @@ def experiment_cli(
 
         cfg = validate(schema, cfg, args.config).model_dump()
     run_dir = make_run_dir(name, args.out)
+    # at once, on a terminal or not: a run that computes for minutes before its first line of
+    # output otherwise looks hung in a log or a notebook
+    print(f"{name}: running {args.config} into {run_dir}", file=sys.stderr, flush=True)
     results = dict(run(cfg, run_dir))
     results.setdefault("config", str(args.config))
     write_results(run_dir, results)
