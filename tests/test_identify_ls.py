@@ -157,3 +157,30 @@ def test_physical_fit_consistent_and_reproduces_torques():
     assert np.allclose(bp.project(lift.theta), psi_true, atol=1e-3 * np.abs(psi_true).max())
     for i in range(3):
         jflex.check_inertia(lift.inertia[i], f"lifted link {i}")
+
+
+def test_physical_fit_on_the_compressed_system_gives_the_full_answer():
+    # |W(A th - y)|^2 = |R th - Q^T W y|^2 + const: same gradient and Gauss-Newton matrix, so the
+    # QR-compressed fit (p rows a step) takes the steps the fit over every sample takes
+    robot = staubli_like(8)
+    reg = idf.Regressor(compensator=(1, 3))
+    samples, tau, (fv, fc, B) = _friction_data(robot, 60, 13, noise=np.array([0.05, 0.05, 0.05]))
+    A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
+    truth = np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B))
+    prior = truth * np.random.default_rng(2).uniform(0.7, 1.3, size=truth.shape)
+    prior[:30] = np.asarray(staubli_like(9).inertia).ravel()
+    w_joint = np.array([1.0, 0.5, 2.0])
+    kw = dict(prior=prior, prior_weight=1e-4, max_steps=40)
+    for weights in (None, w_joint):
+        full = idf.physical_fit(A, y, 3, weights=weights, compress=False, **kw)
+        small = idf.physical_fit(A, y, 3, weights=weights, compress=True, **kw)
+        np.testing.assert_allclose(small.theta, full.theta, rtol=1e-6, atol=1e-8 * np.abs(full.theta).max())
+        assert abs(small.cost - full.cost) <= 1e-9 * full.cost
+    # the weights are the rows' weights: the same as weighting A and y by hand
+    wr = np.tile(w_joint, A.shape[0] // 3)
+    by_hand = idf.physical_fit(A * wr[:, None], y * wr, 3, compress=False, **kw)
+    np.testing.assert_allclose(small.theta, by_hand.theta, rtol=1e-6, atol=1e-8 * np.abs(full.theta).max())
+    for i in range(3):
+        jflex.check_inertia(small.inertia[i], f"link {i}")
+    with pytest.raises(jflex.ParameterError, match="weights"):
+        idf.physical_fit(A, y, 3, weights=np.ones(7))

@@ -79,13 +79,30 @@ def is_consistent(pi, tol: float = 1e-9) -> bool:
 
 class PhysicalResult(NamedTuple):
     """``theta`` (p,): consistent standard parameters (inertial block first, then the rest);
-    ``inertia`` (n, 10); ``cost``: final ``0.5 |r|^2``; ``steps``; ``result``: optimistix code."""
+    ``inertia`` (n, 10); ``cost``: final ``0.5 |r|^2`` (of the weighted rows, over every sample
+    also when the fit ran on the compressed system); ``steps``; ``result``: optimistix code.
+
+    When the best consistent body lies on the boundary of consistency (a zero principal moment),
+    its log-Cholesky coordinates run off to infinity, so the solver's step criterion is never met
+    and ``result`` reports the step limit although the cost has long stopped changing."""
 
     theta: np.ndarray
     inertia: np.ndarray
     cost: float
     steps: int
     result: object
+
+
+def _row_weights(weights, m: int):
+    w = np.asarray(weights, dtype=float).ravel()
+    if w.size == 0 or m % w.size:
+        raise ParameterError(
+            f"physical_fit: weights must have one entry per row of A ({m}) or per joint (a divisor of {m}, "
+            f"rows stacked sample by sample), got {w.size}"
+        )
+    if not np.all(np.isfinite(w)) or np.any(w <= 0):
+        raise ParameterError("physical_fit: weights must be finite and > 0")
+    return np.tile(w, m // w.size)
 
 
 def physical_fit(
@@ -95,11 +112,13 @@ def physical_fit(
     *,
     prior=None,
     prior_weight: float = 1e-6,
+    weights=None,
+    compress: bool | None = None,
     solver=None,
     max_steps: int = 200,
 ) -> PhysicalResult:
-    """Physically consistent least squares: ``min |A theta - y|^2 + w^2 |theta - prior|^2`` with the
-    first ``10 n_links`` entries of theta parametrised per body by log-Cholesky.
+    """Physically consistent least squares: ``min |W (A theta - y)|^2 + w^2 |theta - prior|^2``
+    with the first ``10 n_links`` entries of theta parametrised per body by log-Cholesky.
 
     Works with the full (rank-deficient) standard regressor: the prior (a CAD estimate) fills in
     what the data cannot see, and with ``A = K`` (the base-parameter map) and ``y = psi`` it lifts
@@ -111,27 +130,47 @@ def physical_fit(
     - ``prior`` (p,): reference parameters, also the start (must be consistent or near it);
       default: 1 kg point masses at the origin-ish and zeros for the rest.
     - ``prior_weight``: ``w`` relative to the scale of ``A``.
+    - ``weights``: row weights ``W`` (m,), or one per joint (n_joints,) for rows stacked sample
+      by sample as :meth:`Regressor.stack` does (e.g. ``1 / sigma_j`` from :func:`wls`).
+    - ``compress``: fit the QR-compressed system ``(R, Q^T W y)`` of ``W A = Q R`` instead of
+      every sample: ``|W (A theta - y)|^2 = |R theta - Q^T W y|^2 + const``, so the objective,
+      its gradient and Gauss-Newton matrix, and hence the answer, are the same, at the cost of
+      p rows instead of m per step. Default: when m > 2 p.
     - ``solver``: an optimistix least-squares solver (default Levenberg-Marquardt).
+    - ``max_steps``: the solver's step limit.
 
     **Returns:** :class:`PhysicalResult`.
     """
-    A = jnp.asarray(A, dtype=float)
-    y = jnp.asarray(y, dtype=float).ravel()
-    p = A.shape[1]
+    A = np.asarray(A, dtype=float)
+    y = np.asarray(y, dtype=float).ravel()
+    m, p = A.shape
+    if y.shape[0] != m:
+        raise ParameterError(f"physical_fit: y has {y.shape[0]} entries but A has {m} rows")
     ni = 10 * n_links
     if p < ni:
         raise ParameterError(f"physical_fit: A has {p} columns, fewer than 10 x {n_links} inertial parameters")
+    if weights is not None:
+        wr = _row_weights(weights, m)
+        A, y = A * wr[:, None], y * wr
     if prior is None:
         prior = np.zeros(p)
         prior[:ni] = np.tile([1.0, 0, 0, 0, 1e-2, 0, 1e-2, 0, 0, 1e-2], n_links)
     prior = np.asarray(prior, dtype=float)
     u0_in = np.concatenate([inertia_to_log_cholesky(prior[10 * i : 10 * i + 10]) for i in range(n_links)])
     u0 = jnp.asarray(np.concatenate([u0_in, prior[ni:]]))
-    scale = jnp.linalg.norm(A) / np.sqrt(A.shape[0])
+    # scales of the full system (|A|_F is |R|_F): the compressed fit solves the same problem
+    scale = np.linalg.norm(A) / np.sqrt(m)
     w = prior_weight * scale
     prior_j = jnp.asarray(prior)
     # Rows are scaled by the column norms so that kg and kg m^2 columns weigh alike.
-    ynorm = jnp.maximum(jnp.linalg.norm(y), 1e-300)
+    ynorm = max(float(np.linalg.norm(y)), 1e-300)
+    offset = 0.0  # |y|^2 - |Q^T y|^2: the part of the cost no theta can change
+    if compress if compress is not None else m > 2 * p:
+        Q, R = np.linalg.qr(A, mode="reduced")
+        z = Q.T @ y
+        offset = max(float(y @ y - z @ z), 0.0)
+        A, y = R, z
+    A, y = jnp.asarray(A), jnp.asarray(y)
 
     def theta_of(u):
         inert = jax.vmap(log_cholesky_to_inertia)(u[:ni].reshape(n_links, 10)).ravel()
@@ -144,5 +183,6 @@ def physical_fit(
     solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-12, atol=1e-14)
     sol = optx.least_squares(resid, solver, u0, max_steps=max_steps, throw=False)
     th = np.asarray(theta_of(sol.value))
-    r = np.asarray(resid(sol.value, None)) * float(ynorm)
-    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * r @ r), int(sol.stats["num_steps"]), sol.result)
+    r = np.asarray(resid(sol.value, None)) * ynorm
+    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), int(sol.stats["num_steps"]),
+                          sol.result)
