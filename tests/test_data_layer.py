@@ -344,3 +344,25 @@ def test_h_repeats_of_the_wrong_shape_is_refused_at_load(tmp_path):
     (tmp_path / "case.yaml").write_text(yaml.safe_dump(cfg))
     with pytest.raises(jflex.DataError, match=r"field 'H_repeats': expected shape \(R, 30, 3, 3\)"):
         load_case(tmp_path)
+
+
+def test_a_response_log_with_jitter_is_resampled(tmp_path):
+    # an output-error response log (one joint channel, rest posture q0) whose stamps jitter by 20 %
+    rng = np.random.default_rng(18)
+    h, n = 0.002, 600
+    t = h * np.arange(n) + np.r_[0.0, rng.uniform(-0.2, 0.2, n - 1)] * h
+    u = np.sin(2 * np.pi * 3 * t)
+    y = 0.1 * np.sin(2 * np.pi * 3 * t - 0.3)
+    cols = {"u1": u, "u2": 0.5 * u, "u3": 0.2 * u, "y1": y}
+    _write_csv(tmp_path / "r.csv", t, cols)
+    entry = {"kind": "response", "file": "r.csv", "split": "train", "q0": [0.0, 0.7, -1.3],
+             "columns": {"time": "time", "torque": {j: f"u{k + 1}" for k, j in enumerate(JOINTS)},
+                         "output": {"joint1": "y1"}}}
+    d = load_case(_case(tmp_path, [entry, dict(entry, split="validation", name="v")])).datasets[0]
+    s = d.conditioning["sampling"]
+    assert s["resampled"] and s["jitter_pct"] > 20
+    tt = d.arrays["t"]
+    assert np.ptp(np.diff(tt)) < 1e-9
+    # linear interpolation of a 3 Hz sine sampled at 500 Hz: error below h^2/8 |y''| (steps up to 1.4 h)
+    bound = (1.4 * h) ** 2 / 8 * 0.1 * (2 * np.pi * 3) ** 2
+    assert np.abs(d.arrays["y"][:, 0] - 0.1 * np.sin(2 * np.pi * 3 * tt - 0.3)).max() < bound

@@ -305,6 +305,32 @@ def _response(arrs, path, robot):
     return out, ()
 
 
+def _uniform_response(arrs, path):
+    """A response set's rows resampled onto a uniform grid when its stamps jitter or drop samples
+    (:func:`jflex.data.resample_uniform`); ``(arrays, sampling report or None)``. Malformed
+    fields are left to :func:`_response` to name."""
+    from ..data._condition import resample_uniform
+
+    try:
+        t = np.asarray(arrs["t"], float)
+        tau, y = np.asarray(arrs["tau"], float), np.asarray(arrs["y"], float)
+    except (KeyError, TypeError, ValueError):
+        return arrs, None
+    if t.ndim != 1 or t.size < 20 or tau.shape[:1] != t.shape or y.shape[:1] != t.shape or \
+            not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        return arrs, None
+    rows = {"tau": tau, "y": y}
+    if "y_repeats" in arrs and np.ndim(arrs["y_repeats"]) == 3 and np.shape(arrs["y_repeats"])[1] == t.size:
+        rows["y_repeats"] = np.moveaxis(np.asarray(arrs["y_repeats"], float), 0, 1)
+    t2, rows, report = resample_uniform(t, rows, str(path))
+    if not report["resampled"]:
+        return arrs, report
+    out = {**arrs, "t": t2, "tau": rows["tau"], "y": rows["y"]}
+    if "y_repeats" in rows:
+        out["y_repeats"] = np.moveaxis(rows["y_repeats"], 1, 0)
+    return out, report
+
+
 def _motion_band(q_raw, sig, fs):
     """Highest frequency [Hz] where some joint's angle spectrum (Welch) stands ``RESPONSE_SNR``
     above the white angle noise ``sig`` [rad]."""
@@ -539,7 +565,12 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
                 if c["flags"]:
                     rec.flag(f"tau:{j}", *c["flags"])
         else:
-            data, extra = _LOADERS[d.kind](rec.arrays, fpath, robot)
+            arrs = rec.arrays
+            if d.kind == "response":
+                arrs, sampling = _uniform_response(arrs, fpath)
+                if sampling is not None:
+                    cond["sampling"] = {**sampling, **cond.get("sampling", {})}
+            data, extra = _LOADERS[d.kind](arrs, fpath, robot)
         if d.kind == "response" and tool is None and any(c in TIP_CHANNELS for c in data["channels"]):
             raise _err(file, "tool_frame", f"needed by the response data set {fld} ({fpath.name}): its tip channels "
                        "are positions of the tool frame")
