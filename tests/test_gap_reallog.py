@@ -169,15 +169,7 @@ def test_null_case_masses_ten_percent_off(tmp_path):
         assert link["com_cad"] == link["com_true"]
 
 
-CANNOT_LOAD = {
-    "jitter": "the case loader refuses stamps that repeat ('time must be strictly increasing'): irregular "
-              "CSV stamps (jitter, drops, repeated rows) are not resampled by load_case yet",
-}
-
-
 def _marks(t):
-    if t in CANNOT_LOAD:
-        return pytest.param(t, marks=pytest.mark.xfail(reason=CANNOT_LOAD[t], strict=False))
     if t in ("closed_loop", "cogging"):
         return pytest.param(t, marks=pytest.mark.heavy)  # three simulated records: 10-20 s each
     return t
@@ -185,26 +177,36 @@ def _marks(t):
 
 @pytest.mark.parametrize("trait", [_marks(t) for t in RL.TRAITS])
 def test_every_case_loads(tmp_path, trait):
-    folder, truth = RL.make_reallog_case(tmp_path / trait, trait, seed=11, fmt="extended" if _extended_format() else "current")
+    folder, truth = RL.make_reallog_case(tmp_path / trait, trait, seed=11)
     case = jflex.gap.load_case(folder)
     assert {d.split for d in case.datasets} == {"train", "validation"}
     assert "truth" not in (folder / "case.yaml").read_text()
     assert json.loads((folder / "truth.json").read_text()) == truth
 
 
-def _extended_format() -> bool:
-    from jflex.gap import _schema
+@pytest.mark.parametrize("trait", ["coupled_wrist", "jitter"])
+def test_cases_in_the_plain_format_load(tmp_path, trait):
+    # one CSV per record, diagonal scale only (what a jflex without offsets and couplings read)
+    folder, _ = RL.make_reallog_case(tmp_path / trait, trait, seed=11, fmt="current")
+    jflex.gap.load_case(folder)
 
-    f = _schema.Dataset.model_fields
-    return "coupling" in f and "offset" in f
+
+def test_coupled_drive_torque_is_the_motor_friction_through_the_coupling():
+    # virtual work: the joint torques' power equals the motor friction's power f(w) w
+    rng = np.random.default_rng(9)
+    qd = rng.normal(size=(40, 3))
+    p = {"a": 1, "c": 0.5, "fv": 0.3, "fc": 0.2}
+    tau = RL.planted_torque([dict(effect="coupled_drive", j=2, params=p)], qd, qd, np.zeros(40))
+    w = qd[:, 2] + 0.5 * qd[:, 1]
+    f = 0.3 * w + 0.2 * np.tanh(w / RL.COULOMB_WIDTH)
+    np.testing.assert_allclose((tau * qd).sum(axis=1), f * w, atol=1e-12)
+    np.testing.assert_allclose(tau[:, 0], 0.0)
 
 
 @pytest.mark.parametrize("trait", ["currents", "coupled_wrist"])
 def test_extended_currents_case_loads_as_the_transmission_maps(tmp_path, trait):
     # case.yaml states offsets, data-sheet constants and the coupling: the loaded torques are
     # tau = K^T k_sheet (i - i0) as written out above, from the CSV's raw currents
-    if not _extended_format():
-        pytest.xfail("the case format has no current offsets / coupling matrix yet (datasets[].offset, .coupling)")
     folder, truth = RL.make_reallog_case(tmp_path / trait, trait, seed=12, fmt="extended")
     tr = truth["transmission"]
     case = jflex.gap.load_case(folder)

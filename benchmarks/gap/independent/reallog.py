@@ -14,7 +14,8 @@ family's cases. The traits:
 ``currents``          motor currents instead of torques; the case's torque constants are data-sheet
                       values a few per cent off; gear ratios; per-joint current offsets
 ``coupled_wrist``     as ``currents``, the last two joints driven by two motors through a coupling
-                      matrix ``K``: ``tau = K^T k (i - i0)``
+                      matrix ``K``: ``tau = K^T k (i - i0)``; planted: the coupled motor's own
+                      friction (a coupled drive)
 ``forgotten_scale``   a currents log whose case.yaml forgets the current-to-torque scale
 ``jitter``            CSV stamps jittering by 20 % of the step, dropped samples, repeated rows (same
                       stamp) and stale rows (the previous values at a new stamp)
@@ -59,7 +60,7 @@ ENCODER_STEP = 2 * np.pi / 2**19
 # "current": case.yaml as docs/case_format.md had it when this family was written (one CSV per
 # record; scale per column only); "extended": the fields for real robots (a list of CSV files
 # merged on time, current offsets, a coupling matrix); the currents and jitter cases read it
-CASE_FORMAT = "current"
+CASE_FORMAT = "extended"
 
 
 # --- the physics ----------------------------------------------------------------------------------
@@ -75,6 +76,13 @@ def planted_torque(effects, q, qd, s):
             out[:, j] += p["Fc"] * np.tanh(qd[:, j] / COULOMB_WIDTH)
         elif e["effect"] == "cogging":
             out[:, j] += p["A"] * np.sin(p["periods"] * q[:, j] + p["phase"])
+        elif e["effect"] == "coupled_drive":
+            # friction of motor j, whose shaft also turns with joint a: w = qd_j + c qd_a (joint-side
+            # units); its torque reaches both joints through the coupling row [c, 1]
+            w = qd[:, j] + p["c"] * qd[:, p["a"]]
+            f = p["fv"] * w + p["fc"] * np.tanh(w / COULOMB_WIDTH)
+            out[:, j] += f
+            out[:, p["a"]] += p["c"] * f
         elif e["effect"] == "friction_drift":
             # the viscous coefficient grows linearly over the session, from Fv0 to (1 + DRIFT) Fv0
             out[:, j] += p["Fv0"] * DRIFT * (s - p["s0"]) / (p["s1"] - p["s0"]) * qd[:, j]
@@ -272,7 +280,9 @@ def _effect(rng, true, name, j, scale, qdstd, fric, r=None):
 
 
 def _truth(true, robot, trait, family, effects, expected, noise_std, **extra):
-    te = [dict(effect=e["effect"], joint=true.names[e["j"] + 1], params=e["params"],
+    te = [dict(effect=e["effect"], joint=None if e["effect"] == "coupled_drive" else true.names[e["j"] + 1],
+               params=dict(e["params"], joints=[true.names[e["params"]["a"] + 1], true.names[e["j"] + 1]])
+               if e["effect"] == "coupled_drive" else e["params"],
                in_library=e["effect"] not in ("cogging", "friction_drift")) for e in effects]
     return dict(kind="torque", robot=robot, trait=trait, family=family, effects=te, expected_verdict=expected,
                 noise_std_nm={true.names[k + 1]: float(v) for k, v in enumerate(noise_std)}, dead_channels=[], **extra)
@@ -351,9 +361,20 @@ def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forge
     k_sheet = k_true * (1 + rng.choice([-1.0, 1.0], n) * rng.uniform(0.02, 0.05, n))
     i0 = rng.uniform(-0.05, 0.05, n)
     cpl = (n - 2, n - 1) if coupled else None
-    K, k = current_map(n, gear, k_true, cpl, c=float(rng.uniform(0.3, 1.0)) if coupled else 0.0)
-    eff = [] if forget_scale else [_effect(rng, true, "coulomb_friction", _pick_joint(rng, n, cpl or ()), scale, qdstd,
-                                           (Fv, Fc))]
+    c = float(rng.choice([0.5, 1.0])) if coupled else 0.0  # joint-side coupling ratio (a Staubli TX wrist: 1)
+    K, k = current_map(n, gear, k_true, cpl, c=c)
+    if forget_scale:
+        eff = []
+    elif coupled:
+        # the coupled motor's own friction, as identified on a real coupled wrist: 10-15 % of the
+        # last joint's torque std, half viscous, half Coulomb
+        a, b = cpl
+        r = rng.uniform(0.10, 0.15)
+        wstd = np.hypot(qdstd[b], c * qdstd[a])
+        eff = [dict(effect="coupled_drive", j=b, params={"a": a, "c": c, "fv": float(0.5 * r * scale[b] / wstd),
+                                                          "fc": float(0.5 * r * scale[b])})]
+    else:
+        eff = [_effect(rng, true, "coulomb_friction", _pick_joint(rng, n), scale, qdstd, (Fv, Fc))]
     recs, std = _records(rng, true, trajs, (Fv, Fc), eff, T, fs, 1.0)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
