@@ -1,5 +1,7 @@
-"""Seed 001 as a gap-diagnosis ladder (issue 6, case c): the four model variants of the
-revolute-prismatic arm as a ladder of effects, judged against data from the richest one.
+"""Gap-diagnosis ladder on a flexible revolute-prismatic arm: four model variants as a ladder of effects.
+
+The arm and its variants are those of the paper "Analytical and experimental investigation of the dynamic behavior of a revolute-prismatic manipulator with N flexible links and hubs"; each variant is judged against data simulated
+from the richest one.
 
 "Measured" records come from F.L-F.H-F.J (flexible link, flexible hub, flexible revolute joint;
 Table 3 values, :mod:`seed001_rp_arm`'s ``build``, screw drive and brake) plus white noise of a
@@ -524,7 +526,7 @@ def ladder(cfg, recs, say=print):
                           fit=dict(f["fit"]), solver_steps=f["solver_steps"]))
     gap_after, _, exc_after = gap_summary(ev_cur, floor_d)
     diag = dict(
-        case="seed 001 revolute-prismatic arm: data from F.L-F.H-F.J (simulated + noise), nominal F.L-R.H",
+        case="revolute-prismatic flexible arm: data from F.L-F.H-F.J (simulated + noise), nominal F.L-R.H",
         gap_before=gap0, gap_after=gap_after, noise_floor=fl, noise_floor_per_dataset=floor_d,
         noise_floor_per_channel=fl_per, noise_floor_hf_estimate=hf, noise_floor_hf_per_channel=hf_per,
         excess_before=exc0, excess_after=exc_after,
@@ -579,7 +581,7 @@ def plot_waterfall(diag, rungs, path):
                label=f"significant above {SIGNIFICANCE} x floor + {MIN_GAP} %")
     ax.set_xticks(range(len(rungs)), labels, fontsize=8)
     ax.set_ylabel("validation gap [NRMSE %]")
-    ax.set_title("gap ladder, seed 001 (hatched: fitted, not selected)")
+    ax.set_title("gap ladder, revolute-prismatic flexible arm (hatched: fitted, not selected)")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

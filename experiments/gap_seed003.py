@@ -1,4 +1,6 @@
-"""Seed-003 gap cases (issue 6, 7a/7b): the diagnosis on the thesis' measured modal tables.
+"""Gap diagnosis on measured modal tables of a Kuka KR90 and a Staubli TX200 (two case folders).
+
+The tables, robots and postures are those of the MASc thesis "Posture Dependent Dynamics in Robotic Machining".
 
 (a) Kuka KR90, configuration 1: four measured modes (10, 11, 19.2, 23.7 Hz); the flexible-joint
     model has three. The 19.2 Hz mode must show up as unmatched, and candidates that add a mode
@@ -47,7 +49,7 @@ def _robot_yaml(folder, rob, robot, r):
     # tilts joint 1, as orthogonal_compliance does: an assumption, stated in the notes)
     P[0, 4] = P[0, 6] = 0.5 * P[0, 9]
     np.savez(folder / "inertia.npz", inertia=P)  # a base-parameter realisation: not physical per link
-    base["notes"] = (f"link parameters realised from seed 003 base parameters (jflex.Seed003Robot), "
+    base["notes"] = (f"link parameters realised from the identified base parameters (jflex.Seed003Robot), "
                      f"common gear ratio {r:.1f} (rotor share on the held motors); link1 Ixx = Iyy = Izz/2 assumed")
     (folder / "robot.yaml").write_text(yaml.safe_dump(base, sort_keys=False))
 
@@ -85,7 +87,7 @@ def kr90_case() -> pathlib.Path:
                  zeta=np.array(th["damping_exp_pct"][k])[np.argsort(th["frequency_exp_Hz"][k])] / 100)
     # only configuration 1 has the fourth mode: it is both the training and a validation set
     # (in-sample for that mode); configurations 2 and 3 are held out
-    _write_case(folder, rob, "seed 003 Table 4.6 (Exp. columns) and the 19.2 Hz mode of configuration 1")
+    _write_case(folder, rob, "Table 4.6 (Exp. columns) of \"Posture Dependent Dynamics in Robotic Machining\" (MASc thesis) and the 19.2 Hz mode of configuration 1")
     return folder
 
 
@@ -102,7 +104,7 @@ def staubli_case() -> pathlib.Path:
         o = np.argsort(f)
         np.savez(folder / f"modes_c{k + 1}.npz", q0=np.r_[rob.postures[k], 0.0, q5[k], 0.0], joints=names,
                  freq=f[o], zeta=np.array(th["damping_exp_pct"][k])[o] / 100)
-    _write_case(folder, rob, "seed 003 Table 4.5 (Exp.) with the wrist posture of Table 4.1 recorded as extra joints")
+    _write_case(folder, rob, "Table 4.5 (Exp.) of \"Posture Dependent Dynamics in Robotic Machining\" (MASc thesis) with the wrist posture of Table 4.1 recorded as extra joints")
     return folder
 
 

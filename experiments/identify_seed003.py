@@ -1,4 +1,6 @@
-"""Seed 003: identify joint K and C of the Staubli TX200 and Kuka KR90 from the modal tables.
+"""Joint stiffness K and damping C of a Staubli TX200 and a Kuka KR90 identified from measured modal tables.
+
+The robots, tables and the manually tuned K, C compared against are those of the MASc thesis "Posture Dependent Dynamics in Robotic Machining".
 
 The thesis matched K and C0 by hand to the configuration-1 modes (Tables 4.3/4.4) and predicted
 configurations 2 and 3 (Tables 4.5/4.6: mean errors 5.47 % / 1.1 points for the Staubli,

@@ -1,5 +1,6 @@
-"""Seed 004: identification of the damping of a rigid-flexible planar arm (Table V) and of EI, rho A
-from static deflections (Eq. 29, Table III).
+"""Damping laws of a rigid-flexible planar arm identified from its tip vibration, and EI, rho A from static deflections.
+
+The arm, its Table V damping and its Eq. 29 / Table III statics are those of the paper "Numerical Implementation and Comparison Between the Viscous, Fractional and Hysteretic Damping Models of a Rigid-Flexible Planar Manipulator".
 
 The paper fitted viscous k_e; fractional k_e, alpha; hysteretic h0, delta to tip free vibration
 with fmincon over a Simulink model. Here the same three laws are fitted with
@@ -291,7 +292,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         ax[0].plot(ts, 1e3 * yp, lw=0.9, label=f"{name}: {lab}; NRMSE {nr:.3f}, {row['wall_s']:.0f} s")
         ax[1].plot(ts, 1e3 * (yp - y_true), lw=0.8, label=name)
     out["planted_hysteretic"] = {"h0_N": float(h["h0_N"]), "delta_m": float(h["delta_m"]), "k_e": ke_h}
-    ax[0].set(ylabel="tip deflection [mm]", title="seed 004: damping laws fitted to the tip free vibration")
+    ax[0].set(ylabel="tip deflection [mm]", title="rigid-flexible arm: damping laws fitted to the tip free vibration")
     ax[1].axhline(1e3 * sigma, color="0.6", ls=":", lw=0.8, label="noise std")
     ax[1].axhline(-1e3 * sigma, color="0.6", ls=":", lw=0.8)
     ax[1].set(xlabel="t [s]", ylabel="fit - noise-free truth [mm]")

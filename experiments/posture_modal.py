@@ -1,4 +1,7 @@
-"""Posture-dependent modal analysis of the seed-003 robots (Staubli TX200, Kuka KR90).
+"""Posture-dependent modal analysis of a Staubli TX200 and a Kuka KR90: modal tables, frequency maps, FRFs, lobes.
+
+The robots (kinematics, identified base parameters, joint K and C) and the measured tables are
+those of the MASc thesis "Posture Dependent Dynamics in Robotic Machining"; table, figure and equation numbers below are that thesis'.
 
 For each robot: rigid core from the DH table plus a link-parameter realisation of the identified
 base parameters (Appendix B's M(q) and G(q), checked against jflex's own regressor), flexible
@@ -277,7 +280,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     ax.grid(True, alpha=0.3)
     ax.legend()
     _caption(fig, rob, f"{rob.name}: stability limits at configurations {', '.join(str(k + 1) for k in lb['postures'])}; "
-             f"milling parameters seed 003 Table 4.7")
+             f"milling parameters of Table 4.7 of the MASc thesis \"Posture Dependent Dynamics in Robotic Machining\"")
     fig.savefig(run_dir / "stability_lobes.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     results["stability_lobes"] = {"robot": lb["robot"], "postures": lobes_out}

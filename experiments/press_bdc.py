@@ -1,4 +1,6 @@
-"""BDC deviation of the high-speed multi-link press of seed 002 against speed, with and without joint stiffness.
+"""Bottom-dead-centre deviation of a high-speed multi-link press against speed, with and without joint stiffness.
+
+The press is that of the paper "Elastic dynamic research of high-speed multi-link precision press considering structural stiffness of rotation joints".
 
 Usage: ``python experiments/press_bdc.py [configs/press.yaml] [--out DIR]``. Writes
 ``results.json`` and plots into the run folder. See docs/press.md.

@@ -1,4 +1,6 @@
-"""Seed 000: 1-DOF free, damped and forced responses and the Duhamel integral against closed forms.
+"""One-degree-of-freedom free, damped and forced responses and the Duhamel integral against closed forms.
+
+The textbook cases of the course notes "Manipulator modeling accounting for flexibilities".
 
 Usage: python experiments/seed000_vibration.py [configs/seed000_vibration.yaml] [--out DIR]
 """

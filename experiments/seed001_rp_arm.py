@@ -1,8 +1,11 @@
-"""Seed 001: the single-link revolute-prismatic arm of Table 3 (flexible link sliding through a
-flexible hub, flexible revolute joint) in the four variants F.L-R.H, F.L-F.H, F.L-F.H-F.J and
-F.L-R.H-F.J, under a constant revolute torque, +/- prismatic force steps and a brake, compared
-with Table 5 of the paper (mean and standard deviation of q1, dq1, eta1, deta1 for F.L-F.H-F.J
-and the experiment).
+"""A flexible revolute-prismatic arm in four model variants against the measured means of its source.
+
+The single-link revolute-prismatic arm of Table 3 of the paper "Analytical and experimental
+investigation of the dynamic behavior of a revolute-prismatic manipulator with N flexible links and
+hubs" (flexible link sliding through a flexible hub, flexible revolute joint) in the four variants
+F.L-R.H, F.L-F.H, F.L-F.H-F.J and F.L-R.H-F.J, under a constant revolute torque, +/- prismatic force
+steps and a brake, compared with Table 5 of the paper (mean and standard deviation of q1, dq1, eta1,
+deta1 for F.L-F.H-F.J and the experiment).
 
 Usage: python experiments/seed001_rp_arm.py [configs/seed001_rp_arm_quick.yaml] [--out DIR]
 (configs/seed001_rp_arm.yaml: two hub modes as in the paper; see docs/seed001.md)

@@ -1,4 +1,6 @@
-"""Seed 003 (issue 17): predict held-out EMA configurations of the Staubli TX200 and Kuka KR90.
+"""Predicting held-out measured modes (EMA) of a Staubli TX200 and a Kuka KR90 from joint K, C fitted on others.
+
+Robots, postures and measured tables are those of the MASc thesis "Posture Dependent Dynamics in Robotic Machining".
 
 The thesis fitted joint K and C0 by hand on configuration 1 and predicted configurations 2-3
 (Tables 4.5/4.6). Here, for each robot:

@@ -1,6 +1,9 @@
-"""Seed 004: free vibration of a rigid-flexible planar arm under viscous, fractional and hysteretic
-damping (Table V), tip decay and power spectra (their Figs. 4 and 6 as qualitative reference), and
-the damping-from-modes relation Eq. 30.
+"""Free vibration of a rigid-flexible planar arm under viscous, fractional and hysteretic damping.
+
+The arm of the paper "Numerical Implementation and Comparison Between the Viscous, Fractional and
+Hysteretic Damping Models of a Rigid-Flexible Planar Manipulator": free vibration of a rigid-
+flexible planar arm under viscous, fractional and hysteretic damping (Table V), tip decay and power
+spectra (their Figs. 4 and 6 as qualitative reference), and the damping-from-modes relation Eq. 30.
 
 Usage: python experiments/seed004_damping.py [configs/seed004_rigid_flexible_arm.yaml] [--out DIR]
 """

@@ -97,9 +97,27 @@ def _default_config(name: str) -> pathlib.Path:
                      "is jflex installed complete? (pass a config path)")
 
 
+def _robot_yaml_text(spec: str) -> dict:
+    """The ``source`` and ``notes`` of the robot YAML ``spec`` names (empty for a URDF)."""
+    path = pathlib.Path(spec)
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        path = next((d / f"{spec}.yaml" for d in config_dirs() if (d / f"{spec}.yaml").is_file()), None)
+    if path is None or not path.is_file():
+        return {}
+    cfg = load_yaml(path)
+    return {k: " ".join(str(cfg[k]).split()) for k in ("source", "notes") if cfg.get(k)}
+
+
 def cmd_info(args) -> int:
     robot = load_robot(args.robot)
     print(f"robot: {args.robot}   joints: {robot.nq}   base: {robot.base_name}")
+    for key, text in _robot_yaml_text(str(args.robot)).items():
+        print(f"{key}: {text}")
+    masses = np.asarray(robot.inertia)[:, 0]
+    if not np.any(masses > 0):
+        print("note: no link masses or inertias (all zero): kinematics only; torques are zero and M(q) is singular")
+    if np.all(np.isinf(np.asarray(robot.lower))) and np.all(np.isinf(np.asarray(robot.upper))):
+        print("note: no joint limits given (all infinite)")
     print(f"gravity: {np.asarray(robot.gravity).tolist()} m/s^2")
     hdr = f"{'#':>2} {'joint':<22} {'type':<9} {'parent':<18} {'lower':>9} {'upper':>9} {'vel':>8} {'effort':>8} {'mass[kg]':>9}"
     print(hdr)

@@ -161,3 +161,20 @@ def test_demo_refuses_a_bad_config_before_running(tmp_path, capsys):
     err = capsys.readouterr().err
     assert str(bad) in err and "field 'grid.n'" in err, err
     assert not (tmp_path / "run").exists()
+
+
+def test_run_list_and_info_read_for_a_new_user(capsys):
+    # no internal document names (seed numbers, issue numbers, an unnamed "thesis") in what a
+    # user sees first; a kinematics-only robot says so
+    import re
+
+    from jflex.cli import main
+
+    assert main(["run", "--list"]) == 0
+    # the descriptions (the script names themselves are kept: renaming breaks users' commands)
+    listing = "\n".join(line.split(None, 1)[1] for line in capsys.readouterr().out.strip().splitlines())
+    assert not re.search(r"(?i)seed[ -]?\d|issue \d|thesis", listing), listing
+    assert main(["info", "staubli_tx200"]) == 0
+    info = capsys.readouterr().out
+    assert "Posture Dependent Dynamics in Robotic Machining" in info and "no link masses" in info, info
+    assert not re.search(r"(?i)seed[ -]\d|issue \d", info), info  # a path such as configs/seed003/ is fine
