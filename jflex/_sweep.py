@@ -24,6 +24,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._allocator import tune_allocator
@@ -344,6 +345,8 @@ def sweep(
     nd = len(devices)
     chunk = min(chunk_size, N)
     chunk = int(math.ceil(chunk / nd) * nd)  # every device gets the same share
+    # devices of several processes (jax.distributed): collective loads and gathers below
+    multi = any(d.process_index != jax.process_index() for d in devices)
     mesh = Mesh(np.array(devices), ("batch",))
     sharding = NamedSharding(mesh, PartitionSpec("batch"))
     vfn = _sweep_program(fn)
@@ -357,7 +360,12 @@ def sweep(
         for start in range(0, N, chunk):
             stop = min(start + chunk, N)
             cached = out_path / f"chunk_{start:09d}.npz" if out_path is not None else None
-            if cached is not None and cached.exists():
+            have = cached is not None and cached.exists()
+            if multi:
+                # every process runs every chunk's program together: load a chunk only if every
+                # process has it (a process killed between two saves would otherwise wait alone)
+                have = bool(np.all(multihost_utils.process_allgather(np.array(have))))
+            if have:
                 flat = _load_chunk(cached, _chunk_fingerprint(identity, start, stop), out_path)
                 if treedef is None:
                     treedef = jax.tree_util.tree_structure(jax.eval_shape(jax.vmap(fn), *jax.tree_util.tree_map(lambda a: a[:1], args)))
@@ -365,13 +373,17 @@ def sweep(
             else:
                 pad = chunk - (stop - start)
 
+                xp = np if multi else jnp  # several processes: each passes the same host values
+
                 def take(a):
-                    a = jnp.asarray(a[start:stop])
+                    a = xp.asarray(a[start:stop])
                     if pad:  # repeat the last item so every chunk has one compiled shape
-                        a = jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)])
+                        a = xp.concatenate([a, xp.repeat(a[-1:], pad, axis=0)])
                     return jax.device_put(a, sharding)
 
                 out = vfn(*jax.tree_util.tree_map(take, args))
+                if multi:  # the chunk's outputs live on every process's devices: gather them
+                    out = multihost_utils.process_allgather(out, tiled=True)
                 host = jax.tree_util.tree_map(lambda a: np.asarray(a)[: stop - start], out)
                 flat, treedef = jax.tree_util.tree_flatten(host)
                 if cached is not None:
