@@ -221,6 +221,10 @@ def test_channel_quality_flags_each_trait():
     stuck = x.copy()
     stuck[1000:2200] = stuck[1000]
     assert "stuck" in channel_quality(stuck)["flags"]
+    # the same hold while the robot rests (a noise-free torque at rest) is no fault
+    moving = np.ones(4000, bool)
+    moving[1000:2200] = False
+    assert "stuck" not in channel_quality(stuck, moving=moving)["flags"]
     assert "flat" in channel_quality(1e-7 * x, fellow_std=1.0)["flags"]
 
 

@@ -132,28 +132,30 @@ def merge_on_time(parts, where: str):
                         "span_s": [lo, hi]}
 
 
-def _longest_run(x) -> int:
+def _longest_run(x, moving=None) -> int:
+    """Samples in the longest run of one held value (counting only samples where ``moving``)."""
     if x.size == 0:
         return 0
-    change = np.flatnonzero(np.diff(x) != 0)
-    edges = np.concatenate([[-1], change, [x.size - 1]])
-    return int(np.max(np.diff(edges)))
+    run = np.concatenate([[0], np.cumsum(np.diff(x) != 0)])
+    w = np.ones(x.size) if moving is None else np.asarray(moving, float)
+    return int(np.bincount(run, weights=w).max())
 
 
-def channel_quality(x, fellow_std: float | None = None) -> dict:
+def channel_quality(x, fellow_std: float | None = None, moving=None) -> dict:
     """What is wrong with one channel ``x`` (N,): ``{"flags": [...], ...numbers}``.
 
     ``dead``: exactly zero in ``DEAD_ZEROS`` of the samples or more (a sensor switched off);
     ``flat``: constant, or its spread below ``FLAT_REL`` of ``fellow_std`` (the median spread of
     the other channels of its kind); ``stuck``: one value held in a single run of ``STUCK_RUN`` of
-    the record; ``saturated``: ``SATURATED`` of the samples exactly at its largest or smallest
+    the record while the robot moves (``moving`` (N,) bool, when given: a robot at rest may hold
+    a noise-free torque); ``saturated``: ``SATURATED`` of the samples exactly at its largest or smallest
     value (clipping); ``few_levels``: fewer than ``FEW_LEVELS`` distinct values."""
     x = np.asarray(x, float)
     n = max(x.size, 1)
     zeros = float(np.mean(x == 0.0))
     std = float(x.std())
     levels = int(np.unique(x).size)
-    run = _longest_run(x) / n
+    run = _longest_run(x, moving) / n
     rail = max(float(np.mean(x == x.max())), float(np.mean(x == x.min()))) if x.size else 0.0
     flags = []
     if zeros >= DEAD_ZEROS:
@@ -221,11 +223,13 @@ def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_sp
     report = {"sampling": {**rep_rate, **rep_stamps}}
     tau = np.asarray(rows["tau"], float).copy()
     stds = tau.std(axis=0)
+    q = np.asarray(rows["q"], float)
+    moving = np.concatenate([[False], np.any(np.diff(q, axis=0) != 0, axis=1)]) if q.shape[1] else None
     channels, spikes, excluded = {}, {}, []
     for k, j in enumerate(joints):
         others = np.delete(stds, k)
         fellow = float(np.median(others)) if others.size else None
-        qual = channel_quality(tau[:, k], fellow)
+        qual = channel_quality(tau[:, k], fellow, moving)
         bad = [f for f in qual["flags"] if f in EXCLUDE_FLAGS]
         if bad and j not in keep:
             excluded.append(j)
