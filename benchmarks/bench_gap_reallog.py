@@ -11,7 +11,8 @@ reuses), plus what each trait asks of the diagnosis:
   channels, two rates): the planted effect named first (``top1_effect``, ``top1_joint``);
 - null cases (10 % CAD masses with AR(1) noise; the periodic log): no alarm; the periodic log's
   floor against the true noise (``floor_ratio``: the floor over the NRMSE the true noise gives on
-  the validation record; reported for every NPZ case, the target is the periodic one's);
+  the validation record through the diagnosis' own low-pass; ``floor_ratio_raw``: unfiltered;
+  reported for every NPZ case, the target is the periodic one's);
 - out of library (cogging): not ``explained`` by a wrong effect;
 - drifting friction: not ``within_noise``;
 - a forgotten current scale: refused or not ``explained``;
@@ -76,21 +77,48 @@ def _dead_named(res: dict, joint: str) -> bool:
     return walk(res, False)
 
 
-def _true_floor(case_dir: pathlib.Path, truth: dict) -> float | None:
-    """The NRMSE [%] the true torque noise alone gives on the validation record (mean over the live
-    joints): noise std over the recorded torque's std, per joint. Raw noise: the diagnosis filters
-    angle-only records, so a floor somewhat below it is no error."""
+def _passed_fraction(truth: dict, fs: float, cutoff_hz: float | None) -> float:
+    """Share of the noise variance a zero-phase Butterworth low-pass (order 4, run both ways, as
+    the diagnosis filters angle-only records) keeps at ``cutoff_hz``: the truth's noise spectrum
+    (white, or AR(1) of the truth's pole, 0.7 unless stated) weighed by ``|H|^4``."""
+    from scipy import signal
+
+    if not cutoff_hz:
+        return 1.0
+    f = np.linspace(0.0, fs / 2, 20001)
+    real = truth.get("realism", {})
+    pole = 0.0 if real.get("noise") == "white" else float(real.get("noise_ar1_pole", 0.7))
+    S = 1.0 / np.abs(1.0 - pole * np.exp(-2j * np.pi * f / fs)) ** 2
+    b, a = signal.butter(4, cutoff_hz, fs=fs)
+    _, H = signal.freqz(b, a, worN=f, fs=fs)
+    return float(np.trapezoid(S * np.abs(H) ** 4, f) / np.trapezoid(S, f))
+
+
+def _true_floor(case_dir: pathlib.Path, truth: dict, res: dict | None = None) -> dict | None:
+    """The NRMSE [%] the true torque noise alone gives on the validation record, raw and through
+    the diagnosis' own low-pass (its cutoff read off ``processing``), over the live joints: pooled
+    by signal energy when ``gap_weighting`` says the gap pools, else the mean of the joints'."""
     import yaml
 
     cfg = yaml.safe_load((case_dir / "case.yaml").read_text())
-    val = [d for d in cfg["datasets"] if d["split"] == "validation" and d["file"].endswith(".npz")]
+    val = [d for d in cfg["datasets"] if d["split"] == "validation" and isinstance(d["file"], str)
+           and d["file"].endswith(".npz")]
     if not val:
         return None
     with np.load(case_dir / val[0]["file"]) as z:
-        sd = z["tau"].std(axis=0)
+        sd, t = z["tau"].std(axis=0), z["t"]
     dead = {d["joint"] for d in truth.get("dead_channels", [])}
     live = [k for k, j in enumerate(truth["noise_std_nm"]) if j not in dead]  # a dead joint leaves the gap
-    return float(np.mean(100 * np.asarray(list(truth["noise_std_nm"].values()))[live] / sd[live]))
+    sig = np.asarray(list(truth["noise_std_nm"].values()))[live]
+    sd = sd[live]
+    pooled = "pooled" in str((res or {}).get("gap_weighting", ""))
+
+    def nrmse(s):
+        return float(100 * (np.sqrt(np.sum(s**2) / np.sum(sd**2)) if pooled else np.mean(s / sd)))
+    name = val[0].get("name") or pathlib.Path(val[0]["file"]).stem
+    cutoff = ((res or {}).get("processing") or {}).get(name, {}).get("cutoff_hz")
+    frac = _passed_fraction(truth, 1.0 / float(np.mean(np.diff(t))), cutoff)
+    return dict(raw=nrmse(sig), filtered=nrmse(sig * np.sqrt(frac)), cutoff_hz=cutoff)
 
 
 def score_reallog(res: dict | None, truth: dict, case_dir: pathlib.Path, status: str) -> dict:
@@ -116,10 +144,11 @@ def score_reallog(res: dict | None, truth: dict, case_dir: pathlib.Path, status:
         row["dead_named"] = all(_dead_named(res, j) for j in dead)
     # every NPZ case: the floor over what the true noise gives (the periodic case's is the target;
     # the others' say how far the floor's estimate strays without periods)
-    tf = _true_floor(case_dir, truth)
-    if tf:
+    tf = _true_floor(case_dir, truth, res)
+    if tf and res.get("noise_floor") is not None:
         row["true_floor"] = tf
-        row["floor_ratio"] = float(res["noise_floor"]) / tf if res.get("noise_floor") is not None else None
+        row["floor_ratio"] = float(res["noise_floor"]) / tf["filtered"]
+        row["floor_ratio_raw"] = float(res["noise_floor"]) / tf["raw"]
     return row
 
 
@@ -151,6 +180,8 @@ def summarise(rows: list[dict]) -> dict:
         dead=dict(n=len(dead), lead_where=int(sum(r["dead_leads_where"] for r in dead)),
                   named=int(sum(r["dead_named"] for r in dead))),
         periodic_floor_ratio=by.get("periodic", {}).get("floor_ratio"),
+        other_floor_ratios={r["trait"]: round(r["floor_ratio"], 2) for r in ok
+                            if r.get("floor_ratio") is not None and r["trait"] != "periodic"},
         jitter_as_twin=twin,
         max_seconds=float(max(secs)) if secs else None, median_seconds=float(np.median(secs)) if secs else None,
         targets=dict(top1_effect=">= 0.90", null_alarms="0", out_of_library_wrong_explained="0", drift_detected="true",
@@ -171,7 +202,9 @@ def summary_line(s: dict) -> str:
             f"({s['out_of_library']['n']}); drifting friction detected: {_yn(s['drift_detected'])}; forgotten current scale "
             f"refused or not explained: {_yn(s['forgotten_scale_not_explained'])}; dead channels first in `where`: "
             f"{s['dead']['lead_where']} of {s['dead']['n']}, named: {s['dead']['named']} of {s['dead']['n']}; periodic floor / "
-            f"true noise: {'n/a' if fr is None else format(fr, '.2f')}; jittered log diagnosed as its uniform twin: "
+            f"true noise: {'n/a' if fr is None else format(fr, '.2f')} (other NPZ cases: "
+            f"{', '.join(f'{k} {v:.2f}' for k, v in s['other_floor_ratios'].items()) or 'n/a'}); "
+            f"jittered log diagnosed as its uniform twin: "
             f"{_yn(s['jitter_as_twin'])}; time per case: median {s['median_seconds'] or float('nan'):.0f} s, "
             f"max {s['max_seconds'] or float('nan'):.0f} s."
             + (f" Not finished: {'; '.join(s['not_finished'])}." if s["not_finished"] else ""))
