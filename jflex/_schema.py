@@ -113,6 +113,9 @@ def _message(model, err) -> tuple[str, str]:
     return field_path(loc), msg
 
 
+_SHOWN = 20  # problems named in a validation message
+
+
 def validate(model: type[BaseModel], data: Any, file: str | os.PathLike, context: dict | None = None):
     """``model.model_validate(data, context=context)``; a failure raises :class:`ConfigError`
     ``"<file>: field '<path>': <what is expected>, got <value>"`` for the first problem (the
@@ -120,10 +123,14 @@ def validate(model: type[BaseModel], data: Any, file: str | os.PathLike, context
     try:
         return model.model_validate(data, context=context)
     except ValidationError as exc:
-        errs = [_message(model, e) for e in exc.errors(include_url=False)]
+        # the first few problems only: a list of 100,000 bad entries would otherwise make a
+        # message (and a formatting loop) as long as the list
+        raw = exc.errors(include_url=False)
+        errs = [_message(model, e) for e in raw[:_SHOWN]]
         fld, msg = errs[0]
         more = sorted({f for f, _ in errs[1:]} - {fld})
-        tail = f" (also: {', '.join(more)})" if more else ""
+        extra = f" and {len(raw) - len(errs)} more" if len(raw) > len(errs) else ""
+        tail = f" (also: {', '.join(more)}{extra})" if more else ""
         raise ConfigError(f"{file}: field '{fld or '<top level>'}': {msg}{tail}") from None
 
 

@@ -15,10 +15,11 @@ import warnings
 
 import numpy as np
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import jflex
+from jflex._runs import MAX_YAML_NODES
 from jflex.gap import load_case
 from test_case_schema import write_case
 
@@ -211,3 +212,87 @@ def test_mutated_urdf(edits, cut):
         cfg["robot"] = "robot.urdf"
         (folder / "case.yaml").write_text(yaml.safe_dump(cfg))
         _check(folder)
+
+
+# --- robot-YAML paths: a robot.yaml in the case names its URDF (urdf:) and the joints it keeps --------
+SMALL = settings(SETTINGS, max_examples=200 if SLOW else 25)
+PATHS = ["arm.urdf", "./arm.urdf", "sub/../arm.urdf", "sub/arm.urdf", "../outside.urdf", "../case/arm.urdf",
+         "sub/../../outside.urdf", "OUTSIDE_ABS", "/etc/passwd", "/", ".", "", "~/arm.urdf", "arm.urdf\x00.txt",
+         "a" * 300 + ".urdf", "x/" * 2000 + "arm.urdf", "link_out.urdf", "sub", "arm.URDF", "C:\\arm.urdf",
+         "ärm.urdf", "arm.urdf ", "\\..\\outside.urdf"]
+JOINTS = [None, ["shoulder"], ["shoulder", "elbow"], ["elbow", "elbow"], [], ["nope"], "shoulder", [1, 2],
+          ["shoulder", "shoulder", "elbow"]]
+
+
+@SMALL
+@given(st.sampled_from(PATHS), st.text(max_size=12), st.sampled_from(JOINTS), st.booleans())
+def test_robot_yaml_paths(path, junk, joints, add_junk):
+    with _case_dir() as folder:
+        (folder / "arm.urdf").write_text(URDF)
+        (folder / "sub").mkdir()
+        outside = folder.parent / "outside.urdf"
+        outside.write_text(URDF)
+        (folder / "link_out.urdf").symlink_to(outside)
+        given_path = str(outside) if path == "OUTSIDE_ABS" else path + (junk if add_junk else "")
+        robot = {"urdf": given_path}
+        if joints is not None:
+            robot["joints"] = joints
+        (folder / "robot.yaml").write_text(yaml.safe_dump(robot, allow_unicode=True))
+        if _check(folder) == "ok":
+            # loaded: then the URDF it read lies inside the case folder, symbolic links resolved
+            target = (folder / given_path).resolve()
+            assert target.is_relative_to(folder.resolve()), f"read {target} from outside the case"
+            assert joints is None or len(set(joints)) == len(joints)
+
+
+# --- YAML aliases, merge keys and repeated keys in case.yaml and robot.yaml -----------------------------
+def _alias_doc(fan, depth, where):
+    """A YAML document whose key ``where`` holds ``fan ** depth`` strings through anchors."""
+    lines = [f"_a0: &a0 [{', '.join(['x'] * fan)}]"]
+    for i in range(1, depth):
+        lines.append(f"_a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * fan)}]")
+    lines.append(f"{where}: *a{depth - 1}")
+    return "\n".join(lines) + "\n"
+
+
+ALIAS_KIND = st.sampled_from(["bomb", "recursive", "duplicate", "merge"])
+
+
+@SMALL
+@given(ALIAS_KIND, st.integers(1, 12), st.integers(1, 9), st.sampled_from(["case", "robot"]),
+       st.sampled_from(["datasets", "notes", "nominal_effects", "robot", "links", "gravity", "joint_names"]))
+@example("bomb", 12, 9, "case", "datasets")  # 5e9 strings: the old loader hung here
+@example("bomb", 10, 6, "robot", "links")
+@example("recursive", 1, 1, "robot", "links")
+@example("duplicate", 1, 1, "case", "notes")
+def test_yaml_aliases(kind, fan, depth, target, key):
+    import time
+
+    with _case_dir() as folder:
+        file = folder / ("case.yaml" if target == "case" else "robot.yaml")
+        good = file.read_text()
+        if kind == "bomb":
+            text = good + _alias_doc(fan, depth, "_bomb")
+            text = text.replace(f"\n{key}:", "\n_replaced:", 1) + f"{key}: *a{depth - 1}\n"
+        elif kind == "recursive":
+            text = good + f"_r: &r [1, *r]\n{key}: *r\n"
+        elif kind == "duplicate":
+            text = good + f"{key}: []\n{key}: {{}}\n"
+        else:  # a merge key overriding a value is ordinary YAML, and still validated
+            text = good + f"_base: &b {{x: {fan}}}\n{key}: {{<<: *b, x: {depth}}}\n"
+        file.write_text(text)
+        t = time.perf_counter()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                load_case(folder)
+        except jflex.JFlexError as exc:
+            msg = str(exc)
+            assert file.name in msg, msg
+            if kind == "bomb" and fan ** depth > MAX_YAML_NODES:
+                assert "aliases" in msg, msg
+            assert FIELD.search(msg) or re.search(r"aliases|recursive alias|duplicate key", msg), msg
+            if kind == "recursive":
+                assert "recursive alias" in msg, msg
+        # a bomb is refused before anything walks it: seconds, even on two busy cores, never minutes
+        assert time.perf_counter() - t < 30, (kind, fan, depth)
