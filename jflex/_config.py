@@ -211,6 +211,14 @@ def _names(value, field: str) -> list[str] | None:
     return value
 
 
+# Why this validation is written by hand while case.yaml and the experiment configs use pydantic
+# (jflex._schema): nearly every rule here ties one field to another - joint_names, links and each
+# limits list must be as long as the DH table has rows, the column order permutes every row and the
+# tool row, the angle unit applies to revolute joints only, lock/joints exist only beside urdf -
+# so a pydantic model would hold these same lines in model validators, and the inertial checks
+# (positive definite, triangle inequality) stay in from_dh/load_urdf, which also serve Python
+# callers. Each message names the field as "<file>.dh.rows[1]". Worth moving when the robot file
+# needs a generated docs table like case.yaml's (jflex._schema.markdown_table).
 def _robot_from_config(cfg, where, base, within=None):
     if not isinstance(cfg, dict):
         raise ConfigError(f"{where}: expected a mapping, got {type(cfg).__name__}")
