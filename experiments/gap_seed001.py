@@ -144,7 +144,7 @@ def check_config(cfg):
 
 
 def record_config(cfg, split):
-    """The seed-001 config of one record: the base arm with this run's modes, schedule and loading."""
+    """The arm config of one record: the base arm with this run's modes, schedule and loading."""
     base = jflex.load_yaml(CONFIGS / cfg["base_config"])
     c = copy.deepcopy(base)
     c["link"]["modes"] = int(cfg["model"]["link_modes"])
@@ -209,7 +209,7 @@ FREES = {"F.J": [Free("joint_stiffness", _joint_stiffness, transform=Log()), Fre
 
 
 class Record:
-    """One measured record: its seed-001 config, sample times, inputs and measured channels."""
+    """One measured record: its arm config, sample times, inputs and measured channels."""
 
     def __init__(self, name, cfg_rec, ts, meas, kw):
         self.name, self.cfg, self.ts, self.meas, self.kw = name, cfg_rec, jnp.asarray(ts), meas, kw
@@ -709,7 +709,7 @@ class SolverConfig(_Strict):
 
 
 class GapSeed001Config(_Strict):
-    base_config: str = Field(description="the seed-001 arm config, in configs/")
+    base_config: str = Field(description="the revolute-prismatic arm config (seed001_rp_arm*.yaml), in configs/")
     model: ModelConfig
     record: RecordConfig
     records: RecordsConfig

@@ -6,7 +6,7 @@ The nominal model is the press of ``configs/press.yaml`` with perfect pins. The 
 elastic BDC deviation of the main slider against crank speed: (i) synthetic records of a richer
 "real" press (each pin's bar moduli scaled by its own factor, bushes softer in tension than the
 paper's ratio, repeated noisy records), trained on low speeds and validated on higher ones, and
-(ii) seed 002's measured 0.13 mm growth from 200 to 600 spm, set beside the model rungs.
+(ii) the press paper's measured 0.13 mm growth from 200 to 600 spm, set beside the model rungs.
 
 Candidates, each one scale factor fitted on the training speeds by least squares (a log grid,
 then golden-section refinement; see :func:`fit` for why not gradients): ``joint_flexibility`` (bar-element pins with the paper's moduli times a

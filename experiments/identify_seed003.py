@@ -50,7 +50,7 @@ class Weights(_Strict):
 
 
 class IdentifySeed003Config(_Strict):
-    robots: Annotated[list[str], Field(min_length=1)] = Field(description="seed-003 robot configs, relative to configs/")
+    robots: Annotated[list[str], Field(min_length=1)] = Field(description="robot configs with identified dynamics (seed003/*.yaml), relative to configs/")
     hold: str | list[str] = Field("actuated", description="coordinates held (jflex.modal_analysis)")
     tracking_steps: Annotated[int, Field(ge=1)] | None = Field(
         None, description="unused (rows are paired by shape with configuration 1); kept so older configs validate")
@@ -122,7 +122,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         ax = axes[row, 0]
         x = np.arange(9)
         ax.plot(x, th["frequency_exp_Hz"].ravel(), "ko", label="EMA (Exp.)")
-        ax.plot(x, th["frequency_model_Hz"].ravel(), "s", mfc="none", label="thesis model (manual K, C)")
+        ax.plot(x, th["frequency_model_Hz"].ravel(), "s", mfc="none", label="published model (K, C tuned by hand)")
         ax.plot(x, out["config1"]["frequency_Hz"].ravel(), "x", label="fit on config. 1")
         ax.plot(x, out["all_configs"]["frequency_Hz"].ravel(), "+", ms=10, label="fit on all configs")
         ax.set_ylabel("natural frequency [Hz]")

@@ -112,7 +112,7 @@ from seed004_damping import build as _build_arm  # noqa: E402
 
 
 def build(arm_cfg, law):
-    """The seed-004 arm with the beam damping ``law`` (model only)."""
+    """The rigid-flexible arm with the beam damping ``law`` (model only)."""
     return _build_arm(arm_cfg, law)[0]
 
 

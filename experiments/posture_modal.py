@@ -68,7 +68,7 @@ class LobesConfig(_Strict):
 
 
 class PostureModalConfig(_Strict):
-    robots: Annotated[list[str], Field(min_length=1)] = Field(description="seed-003 robot configs, relative to configs/")
+    robots: Annotated[list[str], Field(min_length=1)] = Field(description="robot configs with identified dynamics (seed003/*.yaml), relative to configs/")
     milling: str = Field(description="milling parameters (Table 4.7), relative to configs/")
     hold: str | list[str] = Field("actuated", description="coordinates held (jflex.modal_analysis)")
     tool_frame: str = "tool"

@@ -135,7 +135,7 @@ def run(cfg: dict, out: pathlib.Path) -> dict:
     ax.set_xlabel("crank speed (spm)")
     ax.set_ylabel("elastic slider deviation at BDC (mm)")
     ax.set_title(
-        f"Seed 002 growth {s_lo:.0f}->{s_hi:.0f} spm: perfect {res['paper']['bdc_growth_perfect_mm']} mm, "
+        f"Press paper, growth {s_lo:.0f}->{s_hi:.0f} spm: perfect {res['paper']['bdc_growth_perfect_mm']} mm, "
         f"joints {res['paper']['bdc_growth_joints_mm']} mm, measured {res['paper']['bdc_growth_measured_mm']} mm",
         fontsize=8,
     )
@@ -176,7 +176,7 @@ def run(cfg: dict, out: pathlib.Path) -> dict:
     plt.close(fig)
     print(
         f"[{time.time() - t0:6.1f}s] BDC growth {s_lo:.0f}->{s_hi:.0f} spm: perfect {gp:.4f} mm, joints {gj:.4f} mm, "
-        f"ratio {gj / gp:.2f} (seed 002: 0.027 / 0.118 mm, ratio 4.4; measured 0.13 mm)",
+        f"ratio {gj / gp:.2f} (press paper: 0.027 / 0.118 mm, ratio 4.4; measured 0.13 mm)",
         flush=True,
     )
     return res
@@ -236,7 +236,7 @@ class PressConfig(_Strict):
     @classmethod
     def _bdc(cls, v):
         if v != 90.0:
-            raise ValueError(f"only 90 (seed 002's convention) is supported, got {v!r}")
+            raise ValueError(f"only 90 (the press paper's convention) is supported, got {v!r}")
         return v
 
 

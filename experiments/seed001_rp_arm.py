@@ -80,7 +80,7 @@ TABLE5 = {
 
 
 class ScrewDrive(AbstractEffect):
-    """The ball-screw prismatic drive of seed 001 as the paper simulates it (see module doc).
+    """The ball-screw prismatic drive as the paper simulates it (see module doc).
 
     Generalised force on joint ``joint``: ``F tanh((v_cmd(t) - qd) / dv)`` with ``v_cmd = +v_max``
     on [0, t_switch), ``-v_max`` on [t_switch, t_stop), 0 after; plus (``cancel_centrifugal``) the

@@ -100,7 +100,7 @@ def write_case(folder: pathlib.Path, rob, base_model, entry: dict, train, valida
     # Izz / 2 as gap_seed003 assumes (it matters only once a candidate tilts joint 1)
     P[0, 4] = P[0, 6] = 0.5 * P[0, 9]
     q = rob.postures
-    notes = "seed 003 robot, links realised from the base parameters with per-joint reflected rotor inertias"
+    notes = "robot of the thesis, links realised from the base parameters with per-joint reflected rotor inertias"
     w = entry.get("wrist")
     if w:
         tool = list(spec["dh"]["tool"])
@@ -131,7 +131,7 @@ def write_case(folder: pathlib.Path, rob, base_model, entry: dict, train, valida
                               stiffness=[float(v) for v in rob.K], damping=[float(v) for v in rob.C])],
         datasets=[dict(kind="modal", file=f"modes_c{k + 1}.npz", split="train", name=f"c{k + 1}_train") for k in train]
         + [dict(kind="modal", file=f"modes_c{k + 1}.npz", split="validation", name=f"c{k + 1}") for k in validation],
-        noise=dict(modal_frequency_pct=1.0), notes=f"seed 003 Table {TABLE[rob.name]} (Exp.); {notes}",
+        noise=dict(modal_frequency_pct=1.0), notes=f"Table {TABLE[rob.name]} (Exp.) of the MASc thesis \"Posture Dependent Dynamics in Robotic Machining\"; {notes}",
     )
     (folder / "case.yaml").write_text(yaml.safe_dump(case, sort_keys=False))
     return q
@@ -290,7 +290,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
                "protocol": "per split, the diagnosis trains and validates on the fitted configurations only (it never sees "
                            "the predicted ones); both models are fitted on the fitted configurations",
                "robots": {}}
-    md = ["# Seed 003: predicting held-out configurations (issue 17)", "",
+    md = ["# Predicting held-out EMA configurations (Staubli TX200, Kuka KR90)", "",
           "Held-out mean |frequency error| [%] and mean |damping error| [points] over the table rows of the "
           "configurations not fitted; the thesis' own errors are its Model column against its Exp. column on the same rows.", "",
           "| robot | fitted | predicted | effects diagnosed | thesis f [%] | K,C refit f [%] | K,C + diagnosed f [%] | thesis zeta [pt] | "
@@ -307,7 +307,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         out = {"rotor_model": how, "thesis_table": f"seed 003 Table {tab}",
                "thesis_reported_mean_frequency_error_pct": {
                    "value": float(rob.thesis["mean_frequency_error_pct"]),
-                   "source": f"seed 003 section 4.7 text under Table {tab}",
+                   "source": f"section 4.7 of the MASc thesis \"Posture Dependent Dynamics in Robotic Machining\", text under Table {tab}",
                    "averaging": "all nine rows" if rob.name == "staubli_tx200" else "configurations 2-3 (six rows)"},
                "thesis_rows": [dict(configuration=k + 1, row=i + 1, source=f"seed 003 Table {tab}, configuration {k + 1}, row {i + 1}",
                                     frequency_exp_Hz=float(rob.thesis["frequency_exp_Hz"][k, i]),
@@ -378,7 +378,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         ax.set_title(f"{rob.name}: configurations not fitted")
         ax.legend(fontsize=7)
     fig.text(0.5, 0.0, "Bars: mean |f_pred - f_exp| / f_exp over the table rows of the configurations not fitted; thesis: its Model "
-             "column against its Exp. column on the same rows (seed 003 Tables 4.5, 4.6); it fitted configuration 1, so where "
+             "column against its Exp. column on the same rows (Tables 4.5, 4.6 of the MASc thesis \"Posture Dependent Dynamics in Robotic Machining\"); it fitted configuration 1, so where "
              "a split predicts configuration 1 its bar is in-sample.", ha="center", va="top", fontsize=8, wrap=True)
     fig.tight_layout()
     fig.savefig(run_dir / "prediction.png", dpi=110, bbox_inches="tight")

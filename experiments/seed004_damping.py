@@ -76,7 +76,7 @@ def laws(cfg):
 
 
 def eq30_zeta(k_e, alpha, w):
-    """Seed 004 Eq. 30 solved for zeta: zeta = k_e w^a sin(pi a / 2) / (1 + k_e w^a cos(pi a / 2))."""
+    """Eq. 30 of the damping paper solved for zeta: zeta = k_e w^a sin(pi a / 2) / (1 + k_e w^a cos(pi a / 2))."""
     g = k_e * w**alpha
     return g * np.sin(np.pi * alpha / 2) / (1 + g * np.cos(np.pi * alpha / 2))
 
@@ -124,7 +124,7 @@ def run(cfg, out):
         ax[0].plot(ts, 1e3 * y, label=name, lw=0.8)
         ax[1].semilogy(f, P, label=name, lw=0.8)
     res["free_vibration"] = decay
-    ax[0].set(xlabel="t [s]", ylabel="tip deflection [mm]", title="free vibration of the tip (cf. seed 004 Fig. 6)")
+    ax[0].set(xlabel="t [s]", ylabel="tip deflection [mm]", title="free vibration of the tip (cf. Fig. 6 of the damping paper)")
     ax[1].set(xlabel="f [Hz]", ylabel="power spectrum [m^2/Hz]", xlim=(0, 40), title="spectrum (cf. Fig. 4)")
     for a in ax:
         a.legend()
