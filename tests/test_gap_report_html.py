@@ -82,3 +82,68 @@ def test_payload_line_gives_mass_in_kg_and_com_in_tool_frame(page):
     assert abs(float(m.group(1)) / truth["params"]["m"] - 1) < 0.05
     com_mm = np.array([float(m.group(k)) for k in (2, 3, 4)])
     assert np.max(np.abs(com_mm - 1e3 * np.asarray(truth["params"]["offset"]))) < 5.0
+
+
+def _rewritten(run, **changes):
+    """The demo's diagnosis.json with ``changes``, rendered again as report.md and report.html."""
+    from jflex.gap import _html, _report
+
+    r = json.loads((run / "diagnosis.json").read_text())
+    r.update(changes)
+    payload = changes.pop("_payload", None)
+    r.pop("_payload", None)
+    md = _report.markdown(r, [], robot="arm", payload=payload)
+    page = _html.page(r, run, [], robot_name="arm", nominal_effects=[], payload=payload, modal_tables={}, set_gaps={})
+    return md, page
+
+
+def test_report_speaks_words_and_names_what_it_means(run):
+    diag = json.loads((run / "diagnosis.json").read_text())
+    md = (run / "report.md").read_text()
+    assert "**True**" not in md and "**False**" not in md
+    assert ("significant (above the noise floor)" if diag["significant"] else "not significant") in md
+    # the floor's method and interval, per validation set, in both reports
+    for k, d in diag["noise_floor_details"].items():
+        assert d["method"] in md and not d["failed"]
+    # an effect of no joint in an ambiguous pair: no literal "(None)"
+    md, page = _rewritten(run, ambiguous=[dict(effects=["sensor_delay", "viscous_friction"], joints=[None, "j2"],
+                                               known_pair=True, shrink=[60.0, 58.0])])
+    assert "(None)" not in md and "(None)" not in page and "sensor_delay vs viscous_friction at j2" in md
+
+
+def test_tolerance_bound_names_the_parameter(run):
+    move = dict(link="link3", mass_cad_kg=1.0, mass_kg=1.0, mass_change_pct=0.0, com_cad_m=[0, 0, 0], com_m=[0, 0, 0],
+                com_shift_m=0.0, at_tolerance_bound=True, bound_parameters=["Izz +0.02 kg m^2"])
+    md, page = _rewritten(run, inertia_refit=[move])
+    assert "yes: Izz +0.02 kg m^2" in md and "yes: Izz +0.02 kg m^2" in page
+
+
+def test_a_non_physical_payload_is_said_so():
+    from jflex.gap._html import payload_line, payload_summary
+
+    class Robot:
+        nq, link_names = 2, ("a", "b")
+
+    p = {"m [kg]": 0.0, "m cx [kg m]": 0.0, "m cy [kg m]": 0.0, "m cz [kg m]": 0.0, "Ixx [kg m^2]": -3.5,
+         "Ixy [kg m^2]": 0.0, "Iyy [kg m^2]": 0.1, "Ixz [kg m^2]": 0.0, "Iyz [kg m^2]": 0.0, "Izz [kg m^2]": 0.1}
+    pl = payload_summary({"torque": {"payload": p}}, Robot(), None)
+    assert "non-physical" in payload_line(pl) and "0.000 kg" not in payload_line(pl)
+    p.update({"m [kg]": 1.0, "m cz [kg m]": 0.1})
+    assert "non-physical" in payload_line(payload_summary({"torque": {"payload": p}}, Robot(), None))  # Ixx < 0
+    p["Ixx [kg m^2]"] = 0.1 + 1.0 * 0.1**2
+    pl = payload_summary({"torque": {"payload": p}}, Robot(), None)
+    assert "non-physical" not in payload_line(pl) and "1.000 kg" in payload_line(pl)
+
+
+def test_data_section_lists_left_out_channels_and_conditioning(run):
+    md, page = _rewritten(run, excluded_channels={"val": {"j3": "no signal: the torque is constant (0.013 N m throughout)"}},
+                          conditioning={"val": {"sampling": "resampled 2 % jittered stamps"}})
+    for text in (md, page):
+        assert "j3 (no signal: the torque is constant (0.013 N m throughout))" in text
+        assert "resampled 2 % jittered stamps" in text
+
+
+def test_payload_shown_once_with_units_in_markdown(run):
+    md = (run / "report.md").read_text()
+    assert "m cx [kg m]" not in md  # the link-frame first moments are not a second payload
+    assert re.search(r"Payload: payload \d+\.\d+ kg, centre of mass at", md)

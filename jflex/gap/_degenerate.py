@@ -24,14 +24,14 @@ DEAD_FRACTION = 1e-9
 def _spread(x) -> np.ndarray:
     """Per-column standard deviation, inf when it overflows, NaN when a value is not finite."""
     x = np.asarray(x, float)
+    fin = np.all(np.isfinite(x), axis=0)
+    x = np.where(np.isfinite(x), x, 0.0)
     with np.errstate(over="ignore", invalid="ignore"):
-        if not np.all(np.isfinite(x)):
-            return np.where(np.all(np.isfinite(x), axis=0), np.inf, np.nan)
         m = np.max(np.abs(x), axis=0)
         m = np.where(m > 0, m, 1.0)
         # scaled first: the spread of values near 1e300 overflows when squared
         sd = (x / m).std(axis=0) * m
-    return np.where(np.isfinite(sd), sd, np.inf)
+    return np.where(fin, np.where(np.isfinite(sd), sd, np.inf), np.nan)
 
 
 def torque_channels(name: str, tau, F0, names) -> tuple[dict, str | None]:
@@ -47,11 +47,12 @@ def torque_channels(name: str, tau, F0, names) -> tuple[dict, str | None]:
         elif np.isinf(sd[j]):
             bad[ch] = "torque spread overflows (values near the float64 limit)"
         elif sd[j] <= DEAD_FRACTION * max(nom, 1e-300):
-            bad[ch] = f"no signal: the torque is constant ({float(np.asarray(tau)[0, j]):.4g} N m throughout)"
+            bad[ch] = f"no signal: the torque is constant ({float(np.asarray(tau)[0, j]) + 0.0:.4g} N m throughout)"
     if len(bad) == len(names):
         return bad, "no channel carries a torque signal (" + "; ".join(f"{c}: {r}" for c, r in bad.items()) + ")"
     ok = [j for j, ch in enumerate(names) if ch not in bad]
-    meas = np.sqrt(np.mean(sd[ok] ** 2))
+    top = float(np.max(sd[ok]))
+    meas = np.sqrt(np.mean((sd[ok] / top) ** 2)) * top  # scaled: squares of values near 1e300 overflow
     if nom <= 0 or not (SCALE_RANGE[0] <= meas / nom <= SCALE_RANGE[1]):
         ratio = meas / nom if nom > 0 else np.inf
         return bad, (f"its torque spread ({meas:.3g} N m pooled) is {ratio:.3g} times the nominal model's "

@@ -132,7 +132,9 @@ class Problem:
             if cond:
                 self.conditioning[d.name] = cond
             for ch in getattr(d, "excluded_channels", ()) or ():
-                self.excluded.setdefault(d.name, {})[str(ch)] = "left out by the data conditioning (dead, stuck or flat)"
+                flags = ((cond or {}).get("channels", {}).get(ch, {}) or {}).get("flags") if isinstance(cond, dict) else None
+                self.excluded.setdefault(d.name, {})[str(ch)] = (
+                    "left out by the data conditioning: " + (", ".join(map(str, flags)) if flags else "dead, stuck or flat"))
         refused = []
         for train, sets in ((True, self.ttrain), (False, self.tval)):
             for i, s in enumerate(sets):
