@@ -296,9 +296,10 @@ def _npz_datasets(folder, recs):
     return ds
 
 
-def _records(rng, true, trajs, fric, effects, T, fs, noise_pct, cad=None, home=None, pole=0.7, ref=None):
+def _records(rng, true, trajs, fric, effects, T, fs, noise_pct, cad=None, home=None, pole=0.7, ref=None, tracking=None):
     """Three records (two train, one validation), open loop, or closed loop when ``cad`` is given.
-    Returns the records and the torque noise std (per joint, of the validation record)."""
+    Returns the records and the torque noise std (per joint, of the validation record); a closed
+    loop's largest tracking error per record and joint [rad] goes to ``tracking`` (when a list)."""
     t = np.arange(int(round(T * fs))) / fs
     recs, std = [], None
     for i, tr in enumerate(trajs):
@@ -306,7 +307,9 @@ def _records(rng, true, trajs, fric, effects, T, fs, noise_pct, cad=None, home=N
         if cad is None:
             q, qd, qdd, tau = open_loop(true, tr, t, fric, effects, s)
         else:
-            q, qd, qdd, tau, _ = closed_loop(true, cad, tr, home, t, fric, effects)
+            q, qd, qdd, tau, r = closed_loop(true, cad, tr, home, t, fric, effects)
+            if tracking is not None:
+                tracking.append(np.abs(q - r).max(axis=0).tolist())
         e, std = _noise(rng, tau, noise_pct, pole, ref)
         recs.append((f"traj{i}", "train" if i < 2 else "validation",
                      dict(t=t, q=S.quantise(q, ENCODER_STEP), tau=tau + e)))
@@ -322,19 +325,21 @@ def case_closed_loop(folder, robot="arm3", seed=0, small=True, cogging=False):
     friction at one joint (``cogging``: a cogging torque instead, out of the library)."""
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
-    T, fs = (4.0 if small else 8.0), 500.0
+    T, fs = (4.0 if small else 6.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     j = _pick_joint(rng, true.nq)
     eff = [_effect(rng, true, "cogging" if cogging else "viscous_friction", j, scale, qdstd, (Fv, Fc))]
-    recs, std = _records(rng, true, trajs, (Fv, Fc), eff, T, fs, 1.0, cad=cad, home=home)
+    tracking = []
+    recs, std = _records(rng, true, trajs, (Fv, Fc), eff, T, fs, 1.0, cad=cad, home=home, tracking=tracking)
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     _case_yaml(folder, _npz_datasets(folder, recs), tool, true, (Fv, Fc))
     trait = "cogging" if cogging else "closed_loop"
     truth = _truth(true, robot, trait, "out_of_library" if cogging else "single", eff,
                    "unexplained" if cogging else "explained", std, cad_error=caderr,
-                   realism=dict(fs_hz=fs, controller="PID + CAD feed-forward, 4 Hz", friction_Fv=Fv.tolist(),
+                   realism=dict(fs_hz=fs, controller="PID + CAD feed-forward, 4 Hz",
+                                tracking_error_max_rad=tracking, friction_Fv=Fv.tolist(),
                                 friction_Fc=Fc.tolist(), torque_std=scale.tolist()))
     return _finish(folder, cad, tool, robot, truth)
 
@@ -353,7 +358,7 @@ def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forge
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
     n = true.nq
-    T, fs = (4.0 if small else 8.0), 500.0
+    T, fs = (4.0 if small else 6.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     gear = rng.choice([50.0, 80.0, 100.0, 120.0, 160.0], n)
@@ -426,7 +431,7 @@ def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False, fmt=None):
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
     n = true.nq
-    T, fs = (4.0 if small else 8.0), 500.0
+    T, fs = (4.0 if small else 6.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     eff = [_effect(rng, true, "viscous_friction", _pick_joint(rng, n), scale, qdstd, (Fv, Fc))]
@@ -478,7 +483,7 @@ def case_dead(folder, robot="arm3", seed=0, small=True, stuck=False):
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
     n = true.nq
-    T, fs = (4.0 if small else 8.0), 500.0
+    T, fs = (4.0 if small else 6.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     eff = [_effect(rng, true, "viscous_friction", 1, scale, qdstd, (Fv, Fc))]
@@ -505,7 +510,7 @@ def case_drifting_friction(folder, robot="arm3", seed=0, small=True):
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
     n = true.nq
-    T, fs = (6.0 if small else 20.0), 500.0
+    T, fs = (6.0 if small else 15.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     j = _pick_joint(rng, n)
@@ -524,7 +529,7 @@ def case_multirate(folder, robot="arm3", seed=0, small=True):
     """Training records at 250 Hz, the validation record at 1 kHz. Planted: Coulomb friction."""
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
-    T = 4.0 if small else 8.0
+    T = 4.0 if small else 6.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     eff = [_effect(rng, true, "coulomb_friction", _pick_joint(rng, true.nq), scale, qdstd, (Fv, Fc))]
@@ -548,7 +553,7 @@ def case_periodic(folder, robot="arm3", seed=0, small=True):
     scatter between periods is that noise alone."""
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
-    P, periods, fs = 2.0, (4 if small else 8), 500.0
+    P, periods, fs = 2.0, (4 if small else 6), 500.0
     trajs = _trajs(rng, true, home, P)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], P)
     std = rng.uniform(0.5, 2.0, true.nq) / 100 * scale
@@ -574,7 +579,7 @@ def case_null_cad_ar1(folder, robot="arm3", seed=0, small=True):
     mass exact, AR(1) torque noise of 2 % of each joint's torque std."""
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng, mass_pct=(10.0, 10.0), com_m=(0.0, 0.0))
-    T, fs = (4.0 if small else 8.0), 500.0
+    T, fs = (4.0 if small else 6.0), 500.0
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     pole = float(rng.uniform(0.7, 0.9))
