@@ -133,3 +133,19 @@ def test_panda_without_example_robot_data_names_the_extra(monkeypatch):
 
     extras = tomllib.loads((pathlib.Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
     assert any("example-robot-data" in r for r in extras["project"]["optional-dependencies"]["robots"])
+
+
+@pytest.mark.parametrize("robot", ["arm\x00.yaml", "r" * 5000, "r" * 5000 + ".urdf"])
+def test_case_robot_field_nul_or_too_long(tmp_path, robot):
+    from jflex.gap._case import _load_robot
+
+    with pytest.raises(jflex.ConfigError, match="field 'robot'"):
+        _load_robot(robot, tmp_path, tmp_path / "case.yaml", False)
+
+
+def test_info_with_a_5000_character_name_is_a_clean_error(capsys):
+    from jflex.cli import main
+
+    assert main(["info", "x" * 5000]) == 2
+    err = capsys.readouterr().err
+    assert "too long" in err and len(err) < 400, err
