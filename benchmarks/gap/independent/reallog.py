@@ -12,7 +12,8 @@ family's cases. The traits:
                       true robot (Pinocchio's ABA integrated by SciPy); the logged torque is the
                       controller's command, the logged angles the robot's (not the reference's)
 ``currents``          motor currents instead of torques; the case's torque constants are data-sheet
-                      values a few per cent off; gear ratios; per-joint current offsets
+                      values a few per cent off; gear ratios; per-joint current offsets (stated in
+                      case.yaml, as a zero-current calibration gives them); planted: Coulomb friction
 ``coupled_wrist``     as ``currents``, the last two joints driven by two motors through a coupling
                       matrix ``K``: ``tau = K^T k (i - i0)``; planted: the coupled motor's own
                       friction (a coupled drive)
@@ -50,7 +51,7 @@ TRAITS = ("closed_loop", "currents", "coupled_wrist", "forgotten_scale", "jitter
           "dead_stuck", "drifting_friction", "multirate", "periodic", "null_cad_ar1", "cogging")
 JITTER = 0.2          # steps vary by up to +-20 % of the nominal step
 DROP_FRACTION = 0.02  # samples dropped one by one, besides one burst
-DROP_BURST = 3        # consecutive samples lost once per record (a step of ~4.2 x the nominal one, as on a real 1 kHz log)
+DROP_BURST = 3        # consecutive samples lost once per record (one step of ~4 x the nominal one)
 REPEAT_FRACTION = 0.01  # rows logged twice (same stamp, same values)
 STALE_FRACTION = 0.01   # rows that repeat the previous row's values at their own stamp (a stale reading)
 DEAD_FRACTION = 0.85  # share of exact zeros on a dead channel
