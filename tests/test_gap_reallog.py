@@ -216,3 +216,18 @@ def test_extended_currents_case_loads_as_the_transmission_maps(tmp_path, trait):
         want = RL.torque_from_current(np.asarray(tr["K"]), np.asarray(tr["torque_constant_datasheet"]), i,
                                       np.asarray(tr["current_offset_a"]))
         np.testing.assert_allclose(d.arrays["tau"], want, rtol=1e-9, atol=1e-9)
+
+
+def test_bench_filter_share_of_white_noise_is_the_closed_form():
+    # the runner's true floor passes the noise through the diagnosis' low-pass (Butterworth order
+    # 4 run both ways): for white noise and fc << fs the share of variance kept is
+    # (fc / (fs/2)) * int_0^inf (1 + x^8)^-2 dx = (fc / (fs/2)) * (7/8) (pi/8) / sin(pi/8)
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    import bench_gap_reallog as B
+
+    fs, fc = 1000.0, 10.0
+    want = fc / (fs / 2) * (7 / 8) * (np.pi / 8) / np.sin(np.pi / 8)
+    got = B._passed_fraction({"realism": {"noise": "white"}}, fs, fc)
+    assert abs(got / want - 1) < 0.01
+    # coloured noise keeps more of its variance below the cutoff
+    assert B._passed_fraction({"realism": {"noise_ar1_pole": 0.8}}, fs, fc) > 3 * got
