@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+import yaml
 from scipy.interpolate import CubicSpline
 
 import jflex
@@ -117,7 +118,6 @@ def test_the_dead_channel_is_dead(tmp_path, trait):
     (dead,) = truth["dead_channels"]
     assert dead["joint"] == "joint3"
     # the planted viscous friction at the shoulder is not in the nominal model
-    import yaml
     nominal = yaml.safe_load((folder / "case.yaml").read_text())["nominal_effects"]
     assert {"effect": "viscous_friction", "joint": ["joint1", "joint3"]} in nominal
     for rec in ("traj0", "traj1", "traj2"):
@@ -231,3 +231,18 @@ def test_bench_filter_share_of_white_noise_is_the_closed_form():
     assert abs(got / want - 1) < 0.01
     # coloured noise keeps more of its variance below the cutoff
     assert B._passed_fraction({"realism": {"noise_ar1_pole": 0.8}}, fs, fc) > 3 * got
+
+
+def test_velocity_log_is_one_kilohertz_with_noisy_rates(tmp_path):
+    folder, truth = RL.make_reallog_case(tmp_path / "v", "velocities", seed=13)
+    assert truth["nominal_rate_hz"] == 1000.0
+    hp, p = _read_csv(folder / "raw" / "traj0_position.csv")
+    hv, v = _read_csv(folder / "raw" / "traj0_velocity.csv")
+    np.testing.assert_array_equal(p[:, 0], v[:, 0])  # one stamp per row in every topic
+    # rates differenced once more: noise of the order of 3e-3 rad/s x 1 kHz (4 rad/s^2 on the real log)
+    fresh = np.diff(v[:, 0]) > 0
+    d2 = np.diff(v[:, 1:], axis=0)[fresh] / np.diff(v[:, 0])[fresh, None]
+    noise = 1.4826 * np.median(np.abs(np.diff(d2, axis=0)), axis=0) / np.sqrt(2)
+    assert np.all((noise > 2.0) & (noise < 10.0))
+    cfg = yaml.safe_load((folder / "case.yaml").read_text())
+    assert cfg["datasets"][0]["file"] == ["raw/traj0_position.csv", "raw/traj0_velocity.csv", "raw/traj0_effort.csv"]

@@ -30,6 +30,7 @@ family's cases. The traits:
 ``null_cad_ar1``      nothing planted: masses 10 % off the CAD and AR(1) coloured noise (2 %)
 ``cogging``           a position-dependent cogging torque under closed-loop tracking (out of the
                       library: the right answer is ``unexplained``)
+``velocities``        a jittered 1 kHz log with encoder-differenced velocities and no accelerations
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ from . import signals as S
 from .torque import COULOMB_WIDTH, rnea_batch
 
 TRAITS = ("closed_loop", "currents", "coupled_wrist", "forgotten_scale", "jitter", "jitter_twin", "dead_zero",
-          "dead_stuck", "drifting_friction", "multirate", "periodic", "null_cad_ar1", "cogging")
+          "dead_stuck", "drifting_friction", "multirate", "periodic", "null_cad_ar1", "cogging", "velocities")
 JITTER = 0.2          # steps vary by up to +-20 % of the nominal step
 DROP_FRACTION = 0.02  # samples dropped one by one, besides one burst
 DROP_BURST = 3        # consecutive samples lost once per record (one step of ~4 x the nominal one)
@@ -422,17 +423,20 @@ def case_currents(folder, robot="arm3", seed=0, small=True, coupled=False, forge
     return _finish(folder, cad, tool, robot, truth)
 
 
-def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False, fmt=None):
+def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False, fmt=None, velocity=False):
     """CSV logs whose stamps jitter by 20 % with dropped samples and repeated rows (``twin``: the
     same case sampled uniformly). Planted: viscous friction at one joint. The topics (positions,
     velocities, efforts: one CSV each, as a ROS-derived export) are written under ``raw/``; with
     ``fmt`` ``extended`` case.yaml names the position and effort files of each record (merged on
-    time), else one merged CSV per record."""
+    time), else one merged CSV per record. ``velocity``: a 1 kHz log whose case also reads the
+    logged velocities (encoder-differenced: 3e-3 rad/s of noise, about 4 rad/s^2 once
+    differentiated again) and no accelerations."""
     fmt = fmt or CASE_FORMAT
     rng = np.random.default_rng(seed)
     true, tool, home, cad, caderr = _setup(robot, rng)
     n = true.nq
-    T, fs = (4.0 if small else 6.0), 500.0
+    T, fs = (4.0 if small else 6.0), (1000.0 if velocity else 500.0)
+    vel_noise = 3e-3 if velocity else 1e-3
     trajs = _trajs(rng, true, home, T)
     Fv, Fc, scale, qdstd = _friction(rng, true, trajs[0], T)
     eff = [_effect(rng, true, "viscous_friction", _pick_joint(rng, n), scale, qdstd, (Fv, Fc))]
@@ -450,7 +454,7 @@ def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False, fmt=None):
         q, qd, qdd, tau = open_loop(true, tr, t, (Fv, Fc), eff, t + i * T)
         tau = tau + S.ar1_noise(nrng, tau.shape, 0.7, 0.01 * scale)
         qm = S.quantise(q, ENCODER_STEP)
-        qdm = qd + nrng.normal(0, 1e-3, qd.shape)
+        qdm = qd + nrng.normal(0, vel_noise, qd.shape)
         if rows is not None:
             stale = np.flatnonzero(srng.random(t.size) < STALE_FRACTION)
             stale = stale[stale > 0]
@@ -462,19 +466,24 @@ def case_jitter(folder, robot="arm3", seed=0, small=True, twin=False, fmt=None):
                               max_step_over_nominal=float(dt.max() * fs),
                               jitter_of_kept_steps=float(np.max(np.abs(dt[(dt > 0) & (dt < 1.5 / fs)] * fs - 1)))))
         name = f"traj{i}"
-        hdr = ["time"] + [f"{m}_pos" for m in names] + [f"{m}_effort" for m in names]
-        _write_csv(folder / f"{name}.csv", hdr, [t, *qm.T, *tau.T])
+        vcols = [f"{m}_vel" for m in names] if velocity else []
+        hdr = ["time"] + [f"{m}_pos" for m in names] + vcols + [f"{m}_effort" for m in names]
+        _write_csv(folder / f"{name}.csv", hdr, [t, *qm.T, *(qdm.T if velocity else []), *tau.T])
         for topic, suf, arr in (("position", "pos", qm), ("velocity", "vel", qdm), ("effort", "effort", tau)):
             _write_csv(folder / "raw" / f"{name}_{topic}.csv", ["time"] + [f"{m}_{suf}" for m in names], [t, *arr.T])
-        files = [f"raw/{name}_position.csv", f"raw/{name}_effort.csv"] if fmt == "extended" else f"{name}.csv"
-        ds.append(dict(kind="torque", file=files, split="train" if i < 2 else "validation",
-                       columns=dict(time="time", position={m: f"{m}_pos" for m in names},
-                                    torque={m: f"{m}_effort" for m in names})))
+        topics = ["position"] + (["velocity"] if velocity else []) + ["effort"]
+        files = [f"raw/{name}_{tp}.csv" for tp in topics] if fmt == "extended" else f"{name}.csv"
+        cols = dict(time="time", position={m: f"{m}_pos" for m in names})
+        if velocity:
+            cols["velocity"] = {m: f"{m}_vel" for m in names}
+        cols["torque"] = {m: f"{m}_effort" for m in names}
+        ds.append(dict(kind="torque", file=files, split="train" if i < 2 else "validation", columns=cols))
     _case_yaml(folder, ds, tool, true, (Fv, Fc))
-    truth = _truth(true, robot, "jitter_twin" if twin else "jitter", "single", eff, "explained", 0.01 * scale,
+    trait = "velocities" if velocity else ("jitter_twin" if twin else "jitter")
+    truth = _truth(true, robot, trait, "single", eff, "explained", 0.01 * scale,
                    cad_error=caderr, stamps=stats, nominal_rate_hz=fs,
-                   realism=dict(fs_hz=fs, jitter=0.0 if twin else JITTER, friction_Fv=Fv.tolist(), friction_Fc=Fc.tolist(),
-                                torque_std=scale.tolist()))
+                   realism=dict(fs_hz=fs, jitter=0.0 if twin else JITTER, velocity_noise_rad_s=vel_noise if velocity else None,
+                                friction_Fv=Fv.tolist(), friction_Fc=Fc.tolist(), torque_std=scale.tolist()))
     return _finish(folder, cad, tool, robot, truth)
 
 
@@ -602,6 +611,7 @@ _MAKERS = {  # trait -> (function, its keyword arguments); the functions that wr
     "dead_zero": (case_dead, {}), "dead_stuck": (case_dead, {"stuck": True}),
     "drifting_friction": (case_drifting_friction, {}), "multirate": (case_multirate, {}), "periodic": (case_periodic, {}),
     "null_cad_ar1": (case_null_cad_ar1, {}),
+    "velocities": (case_jitter, {"velocity": True, "fmt": None}),
 }
 
 
@@ -623,7 +633,7 @@ def _robot_for(trait, size):
     if size == "small":
         return "arm3"
     return {"coupled_wrist": "ur5", "dead_zero": "ur5", "dead_stuck": "ur5", "drifting_friction": "panda",
-            "null_cad_ar1": "ur5", "jitter": "panda", "jitter_twin": "panda"}.get(trait, "arm3")
+            "null_cad_ar1": "ur5", "jitter": "panda", "jitter_twin": "panda", "velocities": "panda"}.get(trait, "arm3")
 
 
 def plan(size: str = "small") -> list[dict]:
