@@ -255,7 +255,10 @@ def _mimic_of(j, by_name, where):
             f"{where}: <mimic joint='{leader}'> must name a revolute, continuous or prismatic joint of this URDF; "
             "mimic='independent' ignores <mimic> (as pinocchio.buildModelFromUrdf(path) does)"
         )
-    return leader, _attr_float(el, "multiplier", f"{where} <mimic>", 1.0), _attr_float(el, "offset", f"{where} <mimic>", 0.0)
+    a, b = _attr_float(el, "multiplier", f"{where} <mimic>", 1.0), _attr_float(el, "offset", f"{where} <mimic>", 0.0)
+    if not (np.isfinite(a) and np.isfinite(b)):
+        raise URDFError(f"{where} <mimic>: multiplier and offset must be finite, got {a} and {b}")
+    return leader, a, b
 
 
 _MIMIC_MODES = ("coupled", "independent", "refuse")

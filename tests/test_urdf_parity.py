@@ -419,6 +419,8 @@ def test_mimic_multiplier_offset_and_chain_match_pinocchio():
     cycle = _coupled_urdf('<mimic joint="j2" multiplier="1" offset="0"/>').replace('<mimic joint="j1" multiplier="2"', '<mimic joint="j4" multiplier="2"')
     with pytest.raises(jflex.URDFError, match="mimic each other in a cycle"):
         jflex.from_urdf_string(cycle)
+    with pytest.raises(jflex.URDFError, match="joint 'j2' <mimic>: multiplier and offset must be finite"):
+        jflex.from_urdf_string(text.replace('multiplier="2"', 'multiplier="inf"'))
 
 
 def test_long_chain_loads_without_recursion():
