@@ -1,15 +1,21 @@
 """Sim-to-real gap diagnosis: where the gap lies, which unmodelled effect causes it, how far it
 shrinks once that effect is added and refitted, judged on held-out validation data.
 
-The gap of a validation data set is its NRMSE [%]: torques ``rms(tau_model - tau) / std(tau)``
-per joint; FRFs ``sqrt(sum |H_model - H|^2 / sum |H|^2)`` per entry; modal tables the RMS
-relative frequency error (unmatched measured modes included through their nearest model mode)
-plus ``0.1 x`` the relative damping error; output-error responses (channels lacking some joint,
-e.g. tip coordinates, simulated under their applied torques from rest at ``q0``, :mod:`._response`)
-``rms(y_model - y) / scale`` per channel. The noise floor is the NRMSE that measurement noise
-alone would leave (from repeated records, else from the residual's high-frequency content), and
-the *excess* gap ``sqrt(max(nrmse^2 - floor^2, 0))`` is what a model can close: ``shrink`` is
-the percentage of the excess closed.
+The gap of a validation data set is its NRMSE [%]: torques the residual energy over the
+torque-signal energy pooled over the joints, ``sqrt(sum_j mse_j / sum_j std(tau_j)^2)`` (each
+joint's own NRMSE ``rms(tau_model - tau) / std(tau)`` weighs by its share of the signal, so that a
+near-idle joint cannot outvote a loaded one; channels without signal, or left out by the data
+conditioning, do not enter); FRFs ``sqrt(sum |H_model - H|^2 / sum |H|^2)`` per entry; modal tables
+the RMS relative frequency error (unmatched measured modes included through their nearest model
+mode) plus ``0.1 x`` the relative damping error; output-error responses (channels lacking some
+joint, e.g. tip coordinates, simulated under their applied torques from rest at ``q0``,
+:mod:`._response`) ``rms(y_model - y) / scale`` per channel. The noise floor is the NRMSE that
+measurement noise alone would leave (:func:`._noise.noise_floor`: repeated records, the scatter
+between the periods of a periodic motion, else a black-box model's held-out error; never a
+candidate's residual), with its confidence interval; the *excess* gap
+``sqrt(max(nrmse^2 - floor^2, 0))`` is what a model can close: ``shrink`` is the percentage of
+the excess closed. An effect that makes some joint worse beyond that joint's own floor, or whose
+fit is implausible, is never named.
 """
 
 

@@ -14,7 +14,7 @@ import pathlib
 
 import numpy as np
 
-from ._selection import MIN_NAMED_SHRINK, MIN_STEP_SHRINK
+from ._selection import MIN_NAMED_SHRINK, MIN_STEP_SHRINK, vetoed
 
 SECTIONS = {
     "summary": "Verdict",
@@ -381,7 +381,9 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
     rows = []
     for i, s in enumerate(r["ranking"][:15]):
         sg = s.get("signature")
-        rows.append([str(i + 1), _e(where_label(s)) + (" <span class='tag added'>selected</span>" if where_label(s) in sel else ""),
+        why = vetoed(s)
+        rows.append([str(i + 1), _e(where_label(s)) + (" <span class='tag added'>selected</span>" if where_label(s) in sel else "")
+                     + (f" <span class='tag'>never named: {_e(why)}</span>" if why else ""),
                      _num(s["gap_after"]), f"{s['shrink']:.0f}", _num(s["score"], 1),
                      "" if sg is None else f"{_e(sg['name'])}: {sg['value']:.2f}"])
     H.append(_table(["#", "effect", "gap after [%]", "shrink [%]", "score", "signature"], rows))

@@ -9,6 +9,7 @@ import numpy as np
 from .._runs import write_results
 from . import _figures as FG
 from . import _html
+from ._selection import vetoed
 
 
 def robot_name(case) -> str:
@@ -232,7 +233,9 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     for i, s in enumerate(r["ranking"][:15]):
         sg = s.get("signature")
         sgt = "" if sg is None else "%s (%.2f)" % (sg["name"], sg["value"])
-        L.append(f"| {i + 1} | {s['effect']} | {s['joint'] or s.get('link') or '-'} | {s['gap_after']:.2f} | {s['shrink']:.0f} | "
+        why = vetoed(s)
+        L.append(f"| {i + 1} | {s['effect']}{' (never named: ' + why + ')' if why else ''} | "
+                 f"{s['joint'] or s.get('link') or '-'} | {s['gap_after']:.2f} | {s['shrink']:.0f} | "
                  f"{s['score']:.1f} | {sgt} |")
     if r.get("vetoed"):
         L += ["", "Candidates never named: " + "; ".join(f"{v['candidate']} ({v['reason']})" for v in r["vetoed"][:10]) + "."]
