@@ -160,7 +160,8 @@ def compare(robot, model, rng, crba=True, states=1, kinematics=True, G=None, b=N
                 k = 1 + next(i for i, m in enumerate(robot.mimic) if m >= 0)
             pin.computeJointJacobians(model, data, q)
             J = pin.getJointJacobian(model, data, k, pin.LOCAL_WORLD_ALIGNED)
-            close(jflex.jacobian(robot, th, model.names[k]), J @ G if J.shape[1] == G.shape[0] else J,
+            # by index: a name may be a link's and another joint's (so_arm's 'gripper')
+            close(jflex.jacobian(robot, th, k - 1), J @ G if J.shape[1] == G.shape[0] else J,
                   what=f"jacobian of {model.names[k]}")
         if np.linalg.eigvalsh(M)[0] <= 1e-12 * np.abs(M).max():
             # a moving joint carrying no inertia (romeo's fingers, romeo_laas_small's grippers): M is singular
