@@ -166,3 +166,20 @@ def test_bad_coupled_drive_is_refused():
         E.CoupledDrive(["a", "b"], [[1.0, 1.0]], coulomb=-1.0)
     with pytest.raises(jflex.JFlexError, match="AsymmetricCoulomb.negative"):
         E.AsymmetricCoulomb(["a"], 1.0, -0.1)
+
+
+def test_coupled_drive_matches_the_tx40_coupling_columns(arm):
+    # FIGAROH's Staubli TX40 model (read, not copied: motor 6 turns with joints 5 and 6, w6 = qd5 + qd6)
+    # adds three columns: joint 5 gets (qdd6, qd6, sign(qd5 + qd6)), joint 6 gets (qdd5, qd5,
+    # sign(qd5 + qd6)); the diagonal parts (qdd5 on joint 5, ...) sit in the joints' own armature and
+    # viscous friction. K^T (Ia K qdd + fv K qd + fc sign(K qd)) is those columns plus the diagonal parts.
+    robot, _, _ = arm
+    cd = E.CoupledDrive(robot.joint_names[4:6], [[1.0, 1.0]], smoothing=1e-9)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q, qd, qdd = rng.normal(size=6), rng.normal(size=6), rng.normal(size=6)
+        Y = np.asarray(cd.regressor(robot, q, qd, qdd))[4:6]
+        s = np.sign(qd[4] + qd[5])
+        figaroh = np.array([[qdd[5], qd[5], s], [qdd[4], qd[4], s]])
+        diagonal = np.array([[qdd[4], qd[4], 0.0], [qdd[5], qd[5], 0.0]])
+        np.testing.assert_allclose(Y - diagonal, figaroh, atol=1e-12)

@@ -109,7 +109,7 @@ def test_a_delay_outside_the_plausible_range_is_reported_not_named(tmp_path):
     assert "delay" in entry["implausible"] and "-0.05" in entry["implausible"]
 
 
-@pytest.mark.slow
+@pytest.mark.heavy  # a diagnosis each: 25-60 s idle
 @pytest.mark.parametrize("effect", ["torque_offset", "asymmetric_coulomb"])
 def test_planted_joint_effect_is_found_and_named(tmp_path, effect):
     res, truth = _diagnose(tmp_path, robot="arm3", effect=effect)
@@ -118,7 +118,7 @@ def test_planted_joint_effect_is_found_and_named(tmp_path, effect):
     assert res["verdict"] == "explained"
 
 
-@pytest.mark.slow
+@pytest.mark.heavy  # a diagnosis each: 25-60 s idle
 def test_coupled_wrist_drive_of_a_six_joint_arm_is_found_and_named(tmp_path):
     res, truth = _diagnose(tmp_path, robot="ur5", effect="coupled_drive")
     a, b = (truth["joint_names"][k] for k in truth["params"]["joints"])
