@@ -1,6 +1,13 @@
 """jflex against Pinocchio (and the JAX peers when installed) on the same random Panda states.
 
 Run: ``python benchmarks/bench_dynamics.py [--batches 1 1000 100000] [--out DIR]``.
+
+The headline (``--section whole``, first in ``all``) is what a user waits for: a fresh process,
+timed from launch, that imports jflex, loads the Panda, draws ``--whole-batch`` random states and
+calls ``jflex.batched(f)`` once (compilation included), against a fresh process that imports
+Pinocchio, loads the same arm and calls its ``rneaInParallel`` / ``abaInParallel`` (CRBA: its
+loop). The table after it is the warm figure: ``jflex.batched(f)`` (what users call) beside plain
+``jax.jit(jax.vmap(f))`` and ``jflex.sweep``.
 Prints a table: time per evaluation for each library and the ratio Pinocchio / jflex (> 1: jflex
 faster). Pinocchio is called in a Python loop, one state at a time, as a user would.
 jflex is timed after warm-up with ``block_until_ready``; compile times are reported separately.
@@ -64,6 +71,8 @@ def best_time(fn, reps=5):
 
 
 def bench_jflex(robot, q, qd, qdd, tau):
+    """jflex as users call it: ``jflex.batched(f)`` (the default program) is the headline; plain
+    ``jax.jit(jax.vmap(f))`` and ``jflex.sweep(f, ...)`` (one chunk, host NumPy outputs) beside it."""
     fns = {
         "rnea": lambda a, b, c, d: jflex.rnea(robot, a, b, c),
         "crba": lambda a, b, c, d: jflex.crba(robot, a),
@@ -71,18 +80,23 @@ def bench_jflex(robot, q, qd, qdd, tau):
         "fd (crba+chol)": lambda a, b, c, d: jflex.forward_dynamics(robot, a, b, d, method="crba"),
         "dtau/dq": lambda a, b, c, d: jax.jacfwd(lambda x: jflex.rnea(robot, x, b, c))(a),
     }
-    out, compile_s, first = {}, {}, {}
+    out, compile_s, first, extra = {}, {}, {}, {}
     N = q.shape[0]
     for name, f in fns.items():
-        # batches go through jflex.batched (cache-sized blocks, fusion off for these kernels);
-        # a single state through jit(vmap)
-        jf = jflex.batched(f, batch_size=min(N, 4096), fuse=False) if N > 1 else jax.jit(jax.vmap(f))
+        jf = jflex.batched(f)
         t0 = time.perf_counter()
         jax.block_until_ready(jf(q, qd, qdd, tau))
         compile_s[name] = time.perf_counter() - t0
         out[name] = best_time(lambda: jax.block_until_ready(jf(q, qd, qdd, tau)))
         first[name] = np.asarray(jf(q, qd, qdd, tau))[:CHECK]
-    return out, compile_s, first
+        plain = jax.jit(jax.vmap(f))
+        jax.block_until_ready(plain(q, qd, qdd, tau))
+        extra[name] = {"jit_vmap": best_time(lambda: jax.block_until_ready(plain(q, qd, qdd, tau)))}
+        if N > 1:
+            sw = lambda: jflex.sweep(f, q, qd, qdd, tau, chunk_size=N, progress=False)
+            sw()  # compiles; later calls reuse the program
+            extra[name]["sweep"] = best_time(sw)
+    return out, compile_s, first, extra
 
 
 CHECK = 64  # states whose results are checked against Pinocchio's
@@ -227,8 +241,9 @@ def main(argv=None):
     ap.add_argument("--out", default=None)
     ap.add_argument("--malloc", choices=["hugetlb", "default"], default="hugetlb",
                     help="glibc allocator setting for this process (see the module docstring)")
-    ap.add_argument("--section", choices=["all", "dynamics", "derivatives"], default="all",
-                    help="the rigid-body table, the derivatives section (issue 14), or both")
+    ap.add_argument("--section", choices=["all", "dynamics", "derivatives", "whole"], default="all",
+                    help="the rigid-body table, the derivatives section, the whole-process headline, or all")
+    ap.add_argument("--whole-batch", type=int, default=100000, help="batch of the whole-process headline")
     ap.add_argument("--deriv-batches", type=int, nargs="+", default=[1000, 100000])
     ap.add_argument("--deriv-algorithms", nargs="+", default=list(DERIV_ALGORITHMS), choices=list(DERIV_ALGORITHMS))
     ap.add_argument("--threads", type=int, default=2, help="threads of Pinocchio's *InParallel batches")
@@ -247,6 +262,14 @@ def main(argv=None):
         # glibc reads its tunables once at process start, so the setting needs a fresh process
         env = dict(os.environ, GLIBC_TUNABLES=":".join(filter(None, [os.environ.get("GLIBC_TUNABLES"), tunable])))
         os.execve(sys.executable, [sys.executable, *sys.argv], env)
+    if args.section in ("all", "whole"):
+        # the headline first, in fresh processes: imports, model loading and compilation included
+        wrows = whole_process(args.whole_batch, args.threads)
+        if args.out:
+            pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
+            (pathlib.Path(args.out) / "bench_whole_process.json").write_text(json.dumps({"rows": wrows}, indent=2))
+        if args.section == "whole":
+            return wrows
     robot, model, path = panda7()
     rng = np.random.default_rng(0)
     rows = []
@@ -256,7 +279,7 @@ def main(argv=None):
         q = rng.uniform(-1.5, 1.5, (N, robot.nq))
         qd, qdd = rng.normal(size=(2, N, robot.nq))
         tau = jax.jit(jax.vmap(lambda a, b, c: jflex.rnea(robot, a, b, c)))(q, qd, qdd)
-        jt, jc, first = bench_jflex(robot, q, qd, qdd, np.asarray(tau))
+        jt, jc, first, jx = bench_jflex(robot, q, qd, qdd, np.asarray(tau))
         diffs = check_against_pinocchio(model, first, q, qd, qdd, np.asarray(tau))
         bad = {k: v for k, v in diffs.items() if not v < 1e-9}
         print(f"  batch {N}: max relative difference from Pinocchio " + ", ".join(f"{k} {v:.1e}" for k, v in diffs.items()))
@@ -271,6 +294,8 @@ def main(argv=None):
                 "batch": N,
                 "algorithm": name,
                 "jflex_us": 1e6 * jt[name] / N,
+                "jit_vmap_us": 1e6 * jx[name]["jit_vmap"] / N,
+                "sweep_us": 1e6 * jx[name]["sweep"] / N if "sweep" in jx[name] else None,
                 "jflex_compile_s": jc[name],
                 "max_rel_diff_vs_pinocchio": diffs.get(name),
                 "pinocchio_loop_us": 1e6 * pt[name] / N if name in pt else None,
@@ -282,10 +307,12 @@ def main(argv=None):
             row["ratio_mjx_over_jflex"] = row["mjx_us"] / row["jflex_us"] if row["mjx_us"] else None
             rows.append(row)
     fmt = lambda v, f: "-" if v is None else f.format(v)
-    print(f"{'batch':>7} {'algorithm':<15} {'jflex us':>10} {'pin us':>9} {'pin/jflex':>9} {'mjx us':>9} {'mjx/jflex':>9} {'adam us':>9} {'adam/jflex':>10} {'compile s':>9}")
+    print("jflex us: jflex.batched(f) (what users call); jit(vmap) and sweep beside it")
+    print(f"{'batch':>7} {'algorithm':<15} {'jflex us':>10} {'jit(vmap)':>9} {'sweep us':>9} {'pin us':>9} {'pin/jflex':>9} {'mjx us':>9} {'mjx/jflex':>9} {'adam us':>9} {'adam/jflex':>10} {'compile s':>9}")
     for r in rows:
         print(
-            f"{r['batch']:>7} {r['algorithm']:<15} {r['jflex_us']:>10.3f} {fmt(r['pinocchio_loop_us'], '{:9.3f}')} "
+            f"{r['batch']:>7} {r['algorithm']:<15} {r['jflex_us']:>10.3f} {r['jit_vmap_us']:>9.3f} {fmt(r['sweep_us'], '{:9.3f}')} "
+            f"{fmt(r['pinocchio_loop_us'], '{:9.3f}')} "
             f"{fmt(r['ratio_pin_over_jflex'], '{:9.2f}')} {fmt(r['mjx_us'], '{:9.3f}')} {fmt(r['ratio_mjx_over_jflex'], '{:9.2f}')} "
             f"{fmt(r['adam_us'], '{:9.3f}')} {fmt(r['ratio_adam_over_jflex'], '{:10.2f}')} {r['jflex_compile_s']:>9.2f}"
         )
@@ -297,6 +324,77 @@ def main(argv=None):
                                   devices=jax.devices()[:hd] if hd > 1 else None)
         if args.out:
             (pathlib.Path(args.out) / "bench_derivatives.json").write_text(json.dumps({"jax": jax.__version__, "rows": drows}, indent=2))
+    return rows
+
+
+# ---- whole process: what a user waits for, from the interpreter's start to the answer ---------
+
+_WHOLE_JFLEX = """
+import sys, time
+launch, name, N = float(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+sys.path.insert(0, sys.argv[4])
+import numpy as np
+import jflex
+from bench_dynamics import panda7_jflex
+robot = panda7_jflex()
+rng = np.random.default_rng(0)
+q = rng.uniform(-1.5, 1.5, (N, robot.nq)); qd, qdd = rng.normal(size=(2, N, robot.nq))
+f = {"rnea": lambda a, b, c: jflex.rnea(robot, a, b, c), "crba": lambda a, b, c: jflex.crba(robot, a),
+     "aba": lambda a, b, c: jflex.aba(robot, a, b, c)}[name]
+out = np.asarray(jflex.batched(f)(q, qd, qdd))
+print(time.time() - launch)
+"""
+
+_WHOLE_PIN = """
+import sys, time
+launch, name, N, threads = float(sys.argv[1]), sys.argv[2], int(sys.argv[3]), int(sys.argv[5])
+sys.path.insert(0, sys.argv[4])
+import numpy as np
+import pinocchio as pin
+from bench_dynamics import panda7_pinocchio
+model = panda7_pinocchio()
+rng = np.random.default_rng(0)
+q = rng.uniform(-1.5, 1.5, (N, model.nq)); qd, qdd = rng.normal(size=(2, N, model.nq))
+pool = pin.ModelPool(model, threads)
+qT, vT, aT = (np.asfortranarray(x.T) for x in (q, qd, qdd))
+if name == "crba":  # no crbaInParallel: a loop, as a user would write it
+    data = model.createData()
+    out = [pin.crba(model, data, x).copy() for x in q]
+else:
+    out = np.asarray(getattr(pin, name + "InParallel")(threads, pool, qT, vT, aT))
+print(time.time() - launch)
+"""
+
+
+def panda7_jflex():
+    return panda7()[0]
+
+
+def panda7_pinocchio():
+    return panda7()[1]
+
+
+def whole_process(batch, threads=2, algorithms=("rnea", "crba", "aba")):
+    """Fresh processes, the clock from launch (interpreter, imports, model loading, random states,
+    compilation, one call): jflex's ``batched`` against Pinocchio's ``*InParallel`` on ``threads``
+    threads (CRBA: Pinocchio's loop). Results are checked in the main table, not here."""
+    import subprocess
+
+    here = str(pathlib.Path(__file__).resolve().parent)
+    rows = []
+    print(f"\nwhole process, batch {batch}, load {os.getloadavg()[0]:.2f}:", flush=True)
+    for name in algorithms:
+        times = {}
+        for side, code, extra in (("jflex", _WHOLE_JFLEX, []), ("pinocchio", _WHOLE_PIN, [str(threads)])):
+            res = subprocess.run([sys.executable, "-c", code, str(time.time()), name, str(batch), here, *extra],
+                                 capture_output=True, text=True, timeout=1800)
+            if res.returncode != 0:
+                raise SystemExit(res.stderr[-2000:])
+            times[side] = float(res.stdout.strip().splitlines()[-1])
+        rows.append({"batch": batch, "algorithm": name, "jflex_whole_s": times["jflex"],
+                     "pinocchio_whole_s": times["pinocchio"], "ratio_pin_over_jflex": times["pinocchio"] / times["jflex"]})
+        print(f"  {name:<5} jflex {times['jflex']:7.2f} s   Pinocchio ({'loop' if name == 'crba' else f'{threads}-thread batch'}) "
+              f"{times['pinocchio']:7.2f} s   pin/jflex x{times['pinocchio'] / times['jflex']:.2f}", flush=True)
     return rows
 
 
@@ -346,11 +444,10 @@ def bench_derivatives(robot, model, batches, algorithms, threads=2, devices=None
         for name in algorithms:
             jfn, pfn, par = DERIV_ALGORITHMS[name]
             f = lambda a, b, c, d, jfn=jfn: jfn(robot, a, b, c, d)
-            # the derivative kernels run fused, in lax.map blocks of 1024 states (cache-sized; one
-            # vmapped program over 1e5 states was 1.6x slower): XLA:CPU without fusion (jax 0.10.2)
-            # returned wrong dtau/dqd and M for them (the check below caught it)
-            jf = (jflex.batched(f, batch_size=min(N, 1024)) if "derivatives" in name
-                  else jflex.batched(f, batch_size=min(N, 4096), fuse=False))
+            # as users call them: rnea and aba through batched's default program (one fused vmap);
+            # the derivative kernels in lax.map blocks (program="blocks", 1024 states on CPU: one
+            # vmapped program over 1e5 states was 1.6x slower)
+            jf = jflex.batched(f, program="blocks") if "derivatives" in name else jflex.batched(f)
             t0 = time.perf_counter()
             out = jax.block_until_ready(jf(q, qd, qdd, tau))
             compile_s = time.perf_counter() - t0
@@ -379,7 +476,7 @@ def bench_derivatives(robot, model, batches, algorithms, threads=2, devices=None
                 row["pinocchio_parallel_us"] = 1e6 * best_time(call) / N
                 row["pinocchio_parallel_threads"] = threads
                 if devices:
-                    jf2 = jflex.batched(f, fuse=False, devices=devices)
+                    jf2 = jflex.batched(f, devices=devices)
                     d2 = float(np.abs(np.asarray(jax.block_until_ready(jf2(q, qd, qdd, tau))) - pres).max() / np.abs(pres).max())
                     if not d2 < 1e-9:
                         raise SystemExit(f"{name}: jflex on {len(devices)} devices differs from Pinocchio's {par} by {d2:.1e}")
