@@ -28,6 +28,13 @@ def test_builtin_real_effects_are_registered_candidates():
     assert list(TT.KINDS["torque_offset"].joints(6)) == list(range(6))
 
 
+def _two_joint_robot():
+    return jflex.make_robot(joint_names=["a", "b"], link_names=["l1", "l2"], parents=[-1, 0],
+                            joint_types=["revolute", "revolute"], placement_R=np.stack([np.eye(3)] * 2),
+                            placement_p=np.zeros((2, 3)), axis=[[0, 0, 1], [0, 0, 1]],
+                            inertia=np.stack([np.r_[1.0, np.zeros(9)]] * 2))
+
+
 class _Cogging(E.AbstractLinearEffect):
     """A user's law: ``tau = A sin(3 q)`` (a toy cogging torque), linear in A."""
 
@@ -53,10 +60,7 @@ class _Cogging(E.AbstractLinearEffect):
 
 
 def test_a_users_registered_effect_becomes_a_candidate_without_gap_code():
-    robot = jflex.make_robot(joint_names=["a", "b"], link_names=["l1", "l2"], parents=[-1, 0],
-                             joint_types=["revolute", "revolute"], placement_R=np.stack([np.eye(3)] * 2),
-                             placement_p=np.zeros((2, 3)), axis=[[0, 0, 1], [0, 0, 1]],
-                             inertia=np.stack([np.r_[1.0, np.zeros(9)]] * 2))
+    robot = _two_joint_robot()
     E.register_candidate(_Cogging)
     try:
         assert "toy_cogging" in TT.KINDS
@@ -73,6 +77,26 @@ def test_a_users_registered_effect_becomes_a_candidate_without_gap_code():
     finally:
         EL._REGISTRY.pop("toy_cogging", None)
         TT.KINDS.pop("toy_cogging", None)
+
+
+def test_builtin_candidates_carry_plausible_ranges():
+    # a hose spring fitted as 0.144 rad of gear play, a 80 ms delay, a Coulomb level of 5 x the
+    # joint's torque: each reported with its name, value and range
+    robot = _two_joint_robot()
+    t = np.linspace(0, 1, 101)
+    q = np.stack([np.sin(2 * np.pi * t), np.cos(2 * np.pi * t)], axis=1)
+    tau = 2.0 * q  # rms sqrt(2), std sqrt(2)
+    s = T.TorqueSet(name="s", t=t, q=q, qd=q, qdd=q, tau=tau, F0=tau, scale=np.ones(2), Y=np.zeros((101, 2, 20)),
+                    q_extra=np.zeros((101, 0)), extra_joints=(), robot=robot)
+    msg = TT.LoadedPlay(1, (TT.LOADED, 0.01)).implausible(np.array([0.0, 0.144]), [s])
+    assert "play half-width b = 0.144 rad" in msg and "[0, 0.02] rad" in msg
+    assert TT.LoadedPlay(1, (TT.LOADED, 0.01)).implausible(np.array([0.0, 0.004]), [s]) is None
+    assert "delay = -0.08 s" in TT.SensorDelay(None, -0.08).implausible(np.zeros(0), [s])
+    assert TT.SensorDelay(None, -0.012).implausible(np.zeros(0), [s]) is None
+    lim = 2 * np.sqrt(2)
+    assert TT.make_term("coulomb_friction", 0).implausible(np.array([0.9 * lim]), [s]) is None
+    assert "Fc [N m] = 5" in TT.make_term("coulomb_friction", 0).implausible(np.array([5.0]), [s])
+    assert "negative" in TT.make_term("asymmetric_coulomb", 1).implausible(np.array([0.1, 5.0]), [s])
 
 
 def test_shift_of_either_sign_against_the_closed_form():

@@ -564,6 +564,13 @@ class RegisteredTerm(TorqueTerm):
                 for v in self.info.hyper[0]]
         return min(fits, key=lambda f: f.cost)
 
+    def probes(self):
+        # the residual is correlated with the columns at every grid value (a coupling's sign and
+        # ratio are what the signature must not presume)
+        if self.info.hyper is None:
+            return (self,)
+        return tuple(dataclasses.replace(self, hyper=v) for v in self.info.hyper[0])
+
     def contribute(self, parts, theta) -> None:
         parts.extra.append(self.build(parts.robot).with_parameters(np.asarray(theta, float)))
 
