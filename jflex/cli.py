@@ -7,6 +7,7 @@ import argparse
 import ast
 import importlib
 import importlib.util
+import os
 import pathlib
 import re
 import sys
@@ -301,6 +302,11 @@ def cmd_run(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jflex", description="Differentiable dynamics of flexible manipulators (JAX).")
     p.add_argument("--version", action="version", version=f"jflex {__version__}")
+    p.add_argument("--cache-dir", default=None, metavar="DIR",
+                   help="keep compiled programs in DIR and reuse them in later runs (default: $JFLEX_CACHE_DIR, "
+                   "else ~/.cache/jflex/jax; delete the folder to clear it)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="compile everything afresh and keep nothing on disk (also: JFLEX_NO_CACHE=1)")
     sub = p.add_subparsers(dest="command", required=True)
     pi = sub.add_parser("info", help="print joints, limits and masses of a robot")
     pi.add_argument("robot", help=f"YAML/URDF path or a name ({', '.join(available_robots())})")
@@ -333,6 +339,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        # a run of the command line compiles the same programs as the last run on the same robot:
+        # JAX's persistent cache makes the second run start warm (the API leaves it opt-in)
+        if not (args.no_cache or os.environ.get("JFLEX_NO_CACHE", "") not in ("", "0")):
+            from ._compilation_cache import enable_compilation_cache
+
+            enable_compilation_cache(args.cache_dir)
         return args.fn(args)
     except JFlexError as exc:
         print(f"jflex: error: {exc}", file=sys.stderr)

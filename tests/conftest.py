@@ -9,6 +9,11 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks
 
 jax.config.update("jax_enable_x64", True)
 
+# the command line keeps compiled programs in a user-wide cache by default; the command lines the
+# tests start compile afresh, so a result never depends on what an earlier run left there
+# (tests/test_cli_cache.py turns it back on in its own folders)
+os.environ.setdefault("JFLEX_NO_CACHE", "1")
+
 # Heavier cases run at a small size unless JFLEX_SLOW=1.
 SLOW = os.environ.get("JFLEX_SLOW", "0") == "1"
 
