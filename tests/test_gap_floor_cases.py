@@ -39,7 +39,7 @@ def test_periodic_log_floor_within_20_percent_of_the_true_noise(tmp_path):
     assert d["low"] < d["floor"] < d["high"]
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_drifting_friction_is_not_within_noise(tmp_path):
     folder, truth = reallog.make_reallog_case(tmp_path / "drift", "drifting_friction", seed=0, small=True)
     r = jflex.gap.diagnose(folder).result
