@@ -74,8 +74,8 @@ def _example_robot_urdf(name: str) -> pathlib.Path | None:
     return None
 
 
-# The Panda's second finger mimics the first (a coupled coordinate jflex does not model): the
-# named robot is the 7-joint arm with the hand closed, as the benchmarks use it.
+# The named robot is the 7-joint arm with the hand closed (the fingers, coupled by <mimic>,
+# locked), as the benchmarks use it; load_urdf of the shipped file keeps the fingers coupled.
 _EXAMPLE_LOCKS = {"panda": {"panda_finger_joint1": 0.0, "panda_finger_joint2": 0.0}}
 
 

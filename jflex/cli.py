@@ -111,7 +111,8 @@ def _robot_yaml_text(spec: str) -> dict:
 
 def cmd_info(args) -> int:
     robot = load_robot(args.robot)
-    print(f"robot: {args.robot}   joints: {robot.nq}   base: {robot.base_name}")
+    coupled = f" ({robot.nq} coordinates: mimic joints follow their leaders)" if robot.n_joints != robot.nq else ""
+    print(f"robot: {args.robot}   joints: {robot.n_joints}{coupled}   base: {robot.base_name}")
     for key, text in _robot_yaml_text(str(args.robot)).items():
         print(f"{key}: {text}")
     masses = np.asarray(robot.inertia)[:, 0]
@@ -123,7 +124,7 @@ def cmd_info(args) -> int:
     hdr = f"{'#':>2} {'joint':<22} {'type':<9} {'parent':<18} {'lower':>9} {'upper':>9} {'vel':>8} {'effort':>8} {'mass[kg]':>9}"
     print(hdr)
     print("-" * len(hdr))
-    for i in range(robot.nq):
+    for i in range(robot.n_joints):
         rev = robot.joint_types[i] == "revolute"
         conv = np.rad2deg if rev else (lambda x: x)
         par = robot.link_names[robot.parents[i]] if robot.parents[i] >= 0 else robot.base_name
