@@ -264,11 +264,37 @@ _FALLBACK: dict = {}  # fn -> eqx.filter_jit(jax.vmap(fn)) for functions that ca
 _FALLBACK_SIZE = 32
 
 
-def _sweep_program(fn):
-    """A callable ``items -> vmapped fn(items)`` whose compiled program outlives this sweep."""
+_TRACE_ERRORS = (jax.errors.ConcretizationTypeError, jax.errors.TracerBoolConversionError,
+                 jax.errors.TracerIntegerConversionError, jax.errors.TracerArrayConversionError)
+
+
+def _sweep_program(fn, one_item):
+    """A callable ``items -> vmapped fn(items)`` whose compiled program outlives this sweep.
+
+    ``fn`` is first traced once as it is (``one_item``: shapes of one item; no compilation), so
+    the checks jflex makes on values known at trace time (a robot without inertia, a
+    non-physical parameter) raise as they would in a plain call, before the values become
+    arguments of the shared program. Where ``fn`` needs its closed-over values concrete (Python
+    control flow on them), it is compiled with them as constants, as before."""
+    jax.eval_shape(fn, *one_item)
     template, values = _split(fn)
     if _hashable(template) and _hashable(values):
-        return functools.partial(_vmapped, template, values)
+        shared = functools.partial(_vmapped, template, values)
+
+        def run(*items):
+            nonlocal shared
+            if shared is not None:
+                try:
+                    return shared(*items)
+                except _TRACE_ERRORS:
+                    shared = None
+            return _constant_program(fn)(*items)
+
+        return run
+    return _constant_program(fn)
+
+
+def _constant_program(fn):
     try:
         return _FALLBACK[fn]
     except TypeError:  # an unhashable callable object: compiled for this call only
@@ -349,7 +375,7 @@ def sweep(
     multi = any(d.process_index != jax.process_index() for d in devices)
     mesh = Mesh(np.array(devices), ("batch",))
     sharding = NamedSharding(mesh, PartitionSpec("batch"))
-    vfn = _sweep_program(fn)
+    vfn = _sweep_program(fn, jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(np.shape(a)[1:], np.result_type(a)), args))
 
     if out_path is not None:
         identity = _identity(fn, args, N, chunk, key)

@@ -32,20 +32,52 @@ def q():
     return np.random.default_rng(2).uniform(-3, 3, (50, 1))
 
 
+class Compiles:
+    """Counts XLA backend compilations (JAX's monitoring events) while active."""
+
+    def __enter__(self):
+        from jax import monitoring
+
+        self.n, self.on = 0, True
+        monitoring.register_event_duration_secs_listener(self._seen)
+        return self
+
+    def _seen(self, name, secs, **kw):
+        if self.on and name == "/jax/core/compile/backend_compile_duration":
+            self.n += 1
+
+    def __exit__(self, *exc):
+        self.on = False
+
+
 def test_second_sweep_reuses_the_compiled_program(q):
-    TRACES["n"] = 0
-    for m in (2.0, 3.0, 2.0):  # a new closure each call, over a robot with other numbers
-        out = jflex.sweep(gravity_of(pendulum(m)), q, chunk_size=16, progress=False)
-        np.testing.assert_allclose(out, expected(m, q), rtol=1e-12)
-    assert TRACES["n"] == 1
-    for m in (4.0, 5.0):  # functools.partial over the robot
-        out = jflex.sweep(functools.partial(traced_gravity, pendulum(m)), q, chunk_size=16, progress=False)
-        np.testing.assert_allclose(out, expected(m, q), rtol=1e-12)
-    assert TRACES["n"] == 2
-    # other shapes compile again (once)
-    jflex.sweep(gravity_of(pendulum(2.0)), q[:10], chunk_size=16, progress=False)
-    jflex.sweep(gravity_of(pendulum(6.0)), q[:10], chunk_size=16, progress=False)
-    assert TRACES["n"] == 3
+    jflex.sweep(gravity_of(pendulum(2.0)), q, chunk_size=16, progress=False)
+    with Compiles() as c:
+        for m in (3.0, 2.0, 7.0):  # a new closure each call, over a robot with other numbers
+            out = jflex.sweep(gravity_of(pendulum(m)), q, chunk_size=16, progress=False)
+            np.testing.assert_allclose(out, expected(m, q), rtol=1e-12)
+    assert c.n == 0
+    jflex.sweep(functools.partial(traced_gravity, pendulum(4.0)), q, chunk_size=16, progress=False)
+    with Compiles() as c:  # functools.partial over the robot
+        out = jflex.sweep(functools.partial(traced_gravity, pendulum(5.0)), q, chunk_size=16, progress=False)
+        np.testing.assert_allclose(out, expected(5.0, q), rtol=1e-12)
+    assert c.n == 0
+    with Compiles() as c:  # other shapes compile again
+        jflex.sweep(gravity_of(pendulum(2.0)), q[:10], chunk_size=16, progress=False)
+    assert c.n >= 1
+
+
+def test_sweep_keeps_the_checks_of_a_plain_call(q):
+    empty = pendulum(2.0).replace(inertia=np.zeros((1, 10)))
+    with pytest.raises(jflex.ParameterError, match="no inertial parameters"):
+        jflex.sweep(gravity_of(empty), q, progress=False)
+
+    k = np.array(2.0)
+
+    def branchy(x):  # Python control flow on a closed-over array: compiled with it as a constant
+        return x * 2.0 if float(k) > 1 else x
+
+    np.testing.assert_allclose(jflex.sweep(branchy, q, progress=False), 2.0 * q)
 
 
 def test_sweep_over_an_empty_batch_returns_empty_outputs():
