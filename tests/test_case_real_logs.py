@@ -64,8 +64,6 @@ def test_case_reduces_the_robot_as_pinocchio_does(tmp_path, via):
 
 
 def test_case_init_copies_the_urdf_a_robot_yaml_names_and_merges_logs(tmp_path):
-    from jflex.gap._case_init import case_init
-
     robots = tmp_path / "robots"
     (robots / "urdf").mkdir(parents=True)
     (robots / "urdf" / "arm3.urdf").write_text(R.ARM3_URDF)
@@ -74,7 +72,12 @@ def test_case_init_copies_the_urdf_a_robot_yaml_names_and_merges_logs(tmp_path):
     logs.mkdir()
     t, q = _two_joint_logs(logs)
     out = tmp_path / "case"
-    p = case_init(robots / "arm3.yaml", [logs / "pos.csv", logs / "eff.csv"], out)
+    # as a user types it: jflex case init ROBOT LOG1 LOG2 --out CASE
+    from jflex.cli import main
+
+    assert main(["--no-cache", "case", "init", str(robots / "arm3.yaml"), str(logs / "pos.csv"), str(logs / "eff.csv"),
+                 "--out", str(out)]) == 0
+    p = out / "case.yaml"
     cfg = yaml.safe_load(p.read_text())
     # the robot YAML and its URDF are in the case, the copy pointing at the URDF beside it
     assert (out / "arm3.urdf").read_text() == R.ARM3_URDF

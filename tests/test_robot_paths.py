@@ -149,3 +149,20 @@ def test_info_with_a_5000_character_name_is_a_clean_error(capsys):
     assert main(["info", "x" * 5000]) == 2
     err = capsys.readouterr().err
     assert "too long" in err and len(err) < 400, err
+
+
+@pytest.mark.parametrize("given", ["../outside.urdf", "ABSOLUTE"])
+def test_reduced_robot_yaml_urdf_outside_the_case_refused(tmp_path, given):
+    # the `robot: {file: robot.yaml, joints: [...]}` form reads the URDF its YAML names under the
+    # same rule as the plain `robot: robot.yaml`
+    from types import SimpleNamespace
+
+    from jflex.gap._case import _load_reduced_robot
+
+    outside = tmp_path / "outside.urdf"
+    outside.write_text(URDF)
+    case = _case(tmp_path / "case", str(outside) if given == "ABSOLUTE" else given)
+    spec = SimpleNamespace(file="robot.yaml", joints=["j1"], lock=None)
+    with pytest.raises(jflex.ConfigError, match="allow_outside"):
+        _load_reduced_robot(spec, case, case / "case.yaml", False)
+    assert _load_reduced_robot(spec, case, case / "case.yaml", True).joint_names == ("j1",)

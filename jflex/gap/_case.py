@@ -453,7 +453,7 @@ def _load_reduced_robot(rs, base, file, allow_outside):
                 raise _err(file, "robot.joints", f"{rp.name} is not a robot YAML naming a URDF (urdf:); only a URDF "
                            "robot is reduced")
             cfg = {**cfg, **red}
-            return robot_from_config(cfg, where=str(rp), base=rp.parent)
+            return robot_from_config(cfg, where=str(rp), base=rp.parent, within=None if allow_outside else base)
         if not _CONFIG_NAME.match(spec):
             raise _err(file, "robot.file", f"expected a .urdf/.yaml file or a config name such as panda, got {spec!r}")
         urdf = _example_robot_urdf(spec)

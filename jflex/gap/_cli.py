@@ -101,8 +101,9 @@ def add_subcommands(sub) -> None:
     csub = c.add_subparsers(dest="case_command", required=True)
     ci = csub.add_parser("init", help="a starting case.yaml from the robot's joints and a CSV log's header")
     ci.add_argument("robot", help="a URDF or robot YAML file, or a config name (e.g. panda)")
-    ci.add_argument("log", help="the CSV log (header line of column names)")
-    ci.add_argument("--out", default=None, help="case folder (default: the log's folder); the log is copied there")
+    ci.add_argument("log", nargs="+", help="the CSV log(s) of one run (header line of column names); several "
+                    "files (e.g. positions, velocities, efforts) are merged on their time column")
+    ci.add_argument("--out", default=None, help="case folder (default: the first log's folder); the logs are copied there")
     ci.set_defaults(fn=_case_init)
     b = sub.add_parser("gap-bench", help="withheld-effect bench of the gap diagnosis", description=BENCH_SIZES)
     b.add_argument("--size", choices=("small", "full"), default="full",
