@@ -102,3 +102,34 @@ def test_one_uff58_reader():
 
     assert jflex.identify.read_uff58 is jflex.data.read_uff58
     assert jflex.gap._uff.uff_arrays is jflex.data.uff_arrays
+
+
+def test_one_log_held_out_by_time_window(tmp_path):
+    # `case init --hold-out 0.3`: the last 30 % of one run is the validation set; the two sets hold
+    # exactly the log's samples before and after the split, nothing twice
+    from jflex.cli import main
+
+    (tmp_path / "arm3.urdf").write_text(R.ARM3_URDF)
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    t, q = _two_joint_logs(logs, n=400)
+    out = tmp_path / "case"
+    assert main(["--no-cache", "case", "init", str(tmp_path / "arm3.urdf"), str(logs / "pos.csv"),
+                 str(logs / "eff.csv"), "--out", str(out), "--hold-out", "0.3"]) == 0
+    case = load_case(out)
+    tr, va = (next(d for d in case.datasets if d.split == s) for s in ("train", "validation"))
+    split = 0.7 * (t[-1] - t[0])
+    np.testing.assert_allclose(tr.arrays["t"], t[t <= split + 1e-9], atol=1e-12)
+    np.testing.assert_allclose(va.arrays["t"], t[t >= split - 1e-9], atol=1e-12)
+    np.testing.assert_allclose(va.arrays["q"], q[t >= split - 1e-9], atol=1e-11)
+    assert tr.conditioning["window_s"][1] == pytest.approx(split)
+    # a window the record does not reach is refused, naming the field
+    cfg = yaml.safe_load((out / "case.yaml").read_text())
+    cfg["datasets"][1]["window"] = [100.0, None]
+    (out / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    with pytest.raises(jflex.ConfigError, match=r"datasets\[1\]\.window"):
+        load_case(out)
+    cfg["datasets"][1]["window"] = [2.0, 1.0]
+    (out / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    with pytest.raises(jflex.ConfigError, match="window"):
+        load_case(out)

@@ -490,6 +490,28 @@ def _nominal(specs, robot, file) -> list[dict]:
     return nominal
 
 
+def _window(arrs: dict, window, path, fld: str, case_file) -> dict:
+    """The samples of a time record (``t`` and every array with a time axis: the first one, the
+    second one of ``*_repeats``) inside ``window`` = [start, end] seconds from its first stamp."""
+    t = np.asarray(arrs["t"], float)
+    start, end = window
+    rel = t - t[0]
+    keep = (rel >= start) & (rel <= (np.inf if end is None else end))
+    if keep.sum() < 20:
+        raise _err(case_file, f"{fld}.window", f"{list(window)} s keeps {int(keep.sum())} samples of {path.name} "
+                   f"(its record lasts {rel[-1]:.4g} s): expected a window inside the record with at least 20")
+    out = {}
+    for k, v in arrs.items():
+        a = np.asarray(v)
+        if k.endswith("_repeats") and a.ndim >= 2 and a.shape[1] == t.size:
+            out[k] = a[:, keep]
+        elif a.ndim >= 1 and a.shape[0] == t.size:
+            out[k] = a[keep]
+        else:
+            out[k] = v
+    return out
+
+
 def load_case(path, *, allow_outside: bool = False) -> Case:
     """Read and validate a case folder (or its ``case.yaml``).
 
@@ -555,6 +577,9 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
             rec = Record(uff_arrays(fpath, d, robot, file, fld))
         else:
             rec = read_npz(fpath, f"{fld}.file", file)
+        if d.window is not None:
+            rec.arrays = _window(rec.arrays, d.window, fpath, fld, file)
+            rec.conditioning["window_s"] = list(d.window)
         cond, excluded = dict(rec.conditioning), ()
         if d.kind == "torque":
             data, extra, report, excluded = _torque(rec.arrays, fpath, robot, spec.options.model_dump())

@@ -9,6 +9,7 @@ import pathlib
 import re
 import shutil
 
+import numpy as np
 import yaml
 
 from .._config import load_robot
@@ -97,7 +98,7 @@ def _copy_robot(robot: str, folder: pathlib.Path, local) -> str:
     return local(rpath)
 
 
-def case_init(robot: str, log, out: str | pathlib.Path | None = None) -> pathlib.Path:
+def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: float | None = None) -> pathlib.Path:
     """Write ``case.yaml`` for the CSV ``log`` (or a list of CSV logs of one run: positions,
     velocities, efforts, each with the time column, merged on time by the loader) and the robot
     ``robot`` (a URDF / robot YAML file or a config name) into ``out`` (default: the first log's
@@ -106,6 +107,11 @@ def case_init(robot: str, log, out: str | pathlib.Path | None = None) -> pathlib
     the case reduces the robot to them (``robot: {file, joints}``). A motor-current column gets
     ``scale: TODO``, which :func:`jflex.gap.load_case` refuses until the torque constant is filled
     in. Refuses to overwrite a case.yaml.
+
+    ``hold_out``: a fraction in (0, 1): the log's last ``hold_out`` of its duration becomes the
+    validation set and the rest the training set (two data sets on the same files with a time
+    ``window`` each), so a single run gives a complete case; default: one training set, and the
+    case names the validation set it still needs.
 
     **Returns:** the path of the written case.yaml.
     """
@@ -163,8 +169,21 @@ def case_init(robot: str, log, out: str | pathlib.Path | None = None) -> pathlib
         todo.append("scale (torque constant [N m/A] x gear ratio of each motor current column; the case is refused "
                     "until it is filled in)")
     entry["units"] = {"time": g["units"].get("time", "s"), "position": g["units"].get("position", "rad")}
+    datasets = [entry]
+    if hold_out is not None:
+        if not 0.0 < float(hold_out) < 1.0:
+            raise ConfigError(f"jflex case init: hold_out must lie in (0, 1) (the fraction of the log held out for "
+                              f"validation), got {hold_out}")
+        if g["time"] is None:
+            raise ConfigError("jflex case init: hold_out needs the time column, which could not be guessed")
+        tb = next(tb for tb in tables if g["time"] in tb.header)
+        tt = tb.column(g["time"]) * {"ms": 1e-3, "us": 1e-6, "ns": 1e-9}.get(entry["units"]["time"], 1.0)
+        tt = tt[np.isfinite(tt)]
+        split_s = float(round((1.0 - float(hold_out)) * (tt.max() - tt.min()), 6))
+        datasets = [dict(entry, name="train", window=[0.0, split_s]),
+                    dict(entry, split="validation", name="validation", window=[split_s, None])]
     cfg = {"robot": {"file": robot_entry, "joints": reduced} if reduced else robot_entry,
-           "nominal_effects": [], "datasets": [entry]}
+           "nominal_effects": [], "datasets": datasets}
     head = [
         f"# case.yaml written by 'jflex case init' for {', '.join(p.name for p in logs)} (format: docs/case_format.md).",
         f"# Robot joints: {list(rob.joint_names)}; CSV columns: {header}.",
@@ -172,7 +191,9 @@ def case_init(robot: str, log, out: str | pathlib.Path | None = None) -> pathlib
            "robot.lock to lock them elsewhere)."] if reduced else []),
         "# Check the guessed column map and units; fill in every TODO:",
         *[f"#   - datasets[0].{t}" for t in todo],
-        "#   - a validation data set: another log with split: validation (the gap is judged on held-out data)",
+        *(["#   - a validation data set: another log with split: validation (the gap is judged on held-out data), "
+            "or run 'jflex case init' with --hold-out"] if hold_out is None else
+          [f"# The last {100 * float(hold_out):g} % of the log is the validation set (window, seconds from its first stamp)."]),
         "#   - nominal_effects: what the nominal model already contains (e.g. {effect: viscous_friction, joint: all})",
     ]
     target.write_text("\n".join(head) + "\n" + yaml.safe_dump(cfg, sort_keys=False))

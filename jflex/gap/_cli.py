@@ -39,7 +39,7 @@ def _case_init(args) -> int:
     from ._case_init import case_init
 
     try:
-        path = case_init(args.robot, args.log, args.out)
+        path = case_init(args.robot, args.log, args.out, hold_out=args.hold_out)
     except JFlexError as exc:
         print(f"jflex case init: {exc}", file=sys.stderr)
         return 2
@@ -104,6 +104,8 @@ def add_subcommands(sub) -> None:
     ci.add_argument("log", nargs="+", help="the CSV log(s) of one run (header line of column names); several "
                     "files (e.g. positions, velocities, efforts) are merged on their time column")
     ci.add_argument("--out", default=None, help="case folder (default: the first log's folder); the logs are copied there")
+    ci.add_argument("--hold-out", type=float, default=None, metavar="FRACTION",
+                    help="hold out the log's last FRACTION (e.g. 0.3) of its duration as the validation set")
     ci.set_defaults(fn=_case_init)
     b = sub.add_parser("gap-bench", help="withheld-effect bench of the gap diagnosis", description=BENCH_SIZES)
     b.add_argument("--size", choices=("small", "full"), default="full",

@@ -253,6 +253,10 @@ class Dataset(Strict):
         None, description="CSV and ROS 2 bag: joint -> torque [N m] added after scale and coupling (e.g. a "
                           "gravity-compensation spring or a sensor bias)", json_schema_extra={"expects": "mapping joint: number"})
     units: Units | None = Field(None, description="CSV only: units of the time and angle columns")
+    window: list[float | None] | None = Field(
+        None, description="torque and response sets: the part of the record used, `[start, end]` in seconds from its "
+                          "first stamp (`end` null: to the end); one log can then give a train and a validation set",
+        json_schema_extra={"expects": "[start, end] seconds, 0 <= start < end"})
     delimiter: Literal[",", ";", "tab", "space"] | None = Field(
         None, description="CSV only: field separator (default: sniffed from the header line)")
     q0: list[float] | dict[str, float] | None = Field(
@@ -272,6 +276,19 @@ class Dataset(Strict):
     @classmethod
     def _offsets(cls, v):
         return _factors(v, "key", "")
+
+    @field_validator("window", mode="before")
+    @classmethod
+    def _window(cls, v):
+        if v is None:
+            return v
+        if not (isinstance(v, list) and len(v) == 2):
+            raise _bad("window", "expected [start, end] in seconds from the record's first stamp, got {got}", got=repr(v))
+        a = _number(v[0], "", v)
+        b = None if v[1] is None else _number(v[1], "", v)
+        if not (math.isfinite(a) and a >= 0 and (b is None or (math.isfinite(b) and b > a))):
+            raise _bad("window", "expected finite 0 <= start < end (seconds), got {got}", got=repr(v))
+        return [a, b]
 
     @field_validator("q0", mode="before")
     @classmethod
@@ -313,6 +330,9 @@ class Dataset(Strict):
             raise _bad("format_key", "only for ROS 2 bags (this file is {fmt})", at="topic", fmt=fmt.upper())
         if self.quantity is not None and fmt != "uff":
             raise _bad("format_key", "only for UFF data sets", at="quantity")
+        if self.window is not None and self.kind not in ("torque", "response"):
+            raise _bad("window", "a time window is for torque and response records, not a {kind} set", at="window",
+                       kind=self.kind)
         needs_q0 = fmt == "uff" or (fmt == "csv" and self.kind == "modal")
         if needs_q0 and self.q0 is None:
             raise _bad("missing", "missing (the measurement posture: a {kind} {fmt} file does not hold it)", at="q0",
