@@ -80,7 +80,7 @@ _LAZY_MODULES = {
     "._lagrangian": ("lagrangian_bias", "lagrangian_forward_dynamics", "lagrangian_mass_matrix"),
 }
 _LAZY = {name: (mod, name) for mod, names in _LAZY_MODULES.items() for name in names}
-# subpackages: effects, linear/FRF, FEM, identification (issue 5), sim-to-real gap diagnosis (issue 6)
+# subpackages: effects, linear/FRF, FEM, identification, sim-to-real gap diagnosis
 _LAZY.update({name: ("." + name, "") for name in ("effects", "linear", "fem", "identify", "gap")})
 _LAZY.update({
     "seed003_appendix_b_columns": ("._seed003", "appendix_b_columns"),

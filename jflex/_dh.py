@@ -96,7 +96,7 @@ def from_dh(
     **Arguments:**
 
     - ``table``: (n, 4) rows ``[alpha, a, d, theta]`` [rad, m, m, rad]. In the ``"modified"``
-      (Craig) convention row i holds ``alpha_{i-1}, a_{i-1}, d_i, theta_i`` as in seed 003 Table 2.1;
+      (Craig) convention row i holds ``alpha_{i-1}, a_{i-1}, d_i, theta_i`` as in Table 2.1 of the thesis "Posture Dependent Dynamics in Robotic Machining";
       in the ``"standard"`` convention ``alpha_i, a_i, d_i, theta_i``. For a revolute joint ``theta``
       is the offset added to ``q_i``; for a prismatic joint ``d`` is.
     - ``joint_types``: ``"revolute"``/``"prismatic"`` (or ``"R"``/``"P"``) per row; default revolute.

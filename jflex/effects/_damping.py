@@ -107,10 +107,10 @@ def _complex_modulus(law, w):
 
 
 class KelvinVoigt(AbstractDampingLaw):
-    """Stiffness-proportional (Kelvin-Voigt) damping ``F = k_e K ed`` (seed 004 Eq. 14).
+    """Stiffness-proportional (Kelvin-Voigt) damping ``F = k_e K ed`` (Eq. 14 of "Numerical Implementation and Comparison Between the Viscous, Fractional and Hysteretic Damping Models of a Rigid-Flexible Planar Manipulator").
 
     **Arguments:** ``k_e`` [s]: the retardation time ``sigma = E (eps + k_e d eps/dt)``; for a
-    Kelvin-Voigt coefficient ``K_v`` [Pa s] of seed 001, ``k_e = K_v / E``.
+    Kelvin-Voigt coefficient ``K_v`` [Pa s] of "Analytical and experimental investigation of the dynamic behavior of a revolute-prismatic manipulator with N flexible links and hubs", ``k_e = K_v / E``.
     """
 
     k_e: jnp.ndarray

@@ -1,9 +1,10 @@
-"""Flexible joints: a torsion spring and damper between each link and its motor (seed 003 Eq. 2.8,
-seed 000 "serial system dynamics with flexible joints").
+"""Flexible joints: a torsion spring and damper between each link and its motor (Eq. 2.8 of
+the thesis "Posture Dependent Dynamics in Robotic Machining";
+"serial system dynamics with flexible joints" in the course notes "Manipulator modeling accounting for flexibilities").
 
 The effect adds one motor coordinate ``theta_<joint>`` per flexible joint: the rotor angle
 *after* the gear (rotor angle / r), so the spring torque is ``K (q - theta)`` and the reflected
-rotor inertia is ``r^2 I_m``. With ``coupling=True`` (the full model of seed 000) each rotor
+rotor inertia is ``r^2 I_m``. With ``coupling=True`` (the full model of the course notes) each rotor
 spins on the link that carries it, with absolute spin rate ``r theta_dot + z . omega_parent``:
 
 $$ T_m = \\tfrac12 \\sum_i I_{m,i} (r_i \\dot\\theta_i + z_i\\cdot\\omega_{p(i)})^2, $$
@@ -12,7 +13,7 @@ which yields the inertial coupling ``S(q)`` between link and motor accelerations
 posture-dependent link inertia. ``coupling=False`` is the reduced (Spong) model,
 ``T_m = 1/2 sum r_i^2 I_m,i theta_dot_i^2``. Rotor mass and transverse inertia are taken as part
 of the carrying link's inertial parameters (they move with it), as the base parameters of
-seed 003 Table A.2 do.
+the thesis' Table A.2 do.
 
 The actuators move from the link coordinates to the motor coordinates (``actuation``), so
 ``jflex.model_forward_dynamics`` / ``model_inverse_dynamics`` of a model with this effect are
@@ -120,7 +121,7 @@ class FlexibleJoints(AbstractEffect):
     (energy, linearisation) holds.
 
     Note: a smooth Coulomb term linearises at rest to a viscous coefficient F_s / v_s; set the
-    Coulomb coefficients to 0 for a modal analysis in the sense of seed 003 (Coulomb neglected).
+    Coulomb coefficients to 0 for a modal analysis in the sense of the thesis (Coulomb neglected).
     """
 
     stiffness: jnp.ndarray

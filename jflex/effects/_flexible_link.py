@@ -19,12 +19,12 @@ parts (give it zero beam mass). With ``include_rigid=False`` the effect adds onl
 as a rigid body; this is the natural choice for a link sliding through a prismatic hub
 (``sliding_joint``), whose rigid inertia the prismatic body already carries.
 
-**Sliding link (seed 001).** With ``sliding_joint`` the free length is
+**Sliding link** (as in "Analytical and experimental investigation of the dynamic behavior of a revolute-prismatic manipulator with N flexible links and hubs"). With ``sliding_joint`` the free length is
 ``l = beam.length + q[sliding_joint]`` (the joint coordinate is the extension), the shapes scale
 with ``l`` (time-varying mode shapes) and material points flow outward at ``dl/dt``: each
 point is labelled by its distance from the free end, which is what the jvp holds fixed.
 
-**Flexible hub (seed 001).** With ``hub`` (a :class:`jflex.Beam`) the hub is itself a clamped
+**Flexible hub** (same source). With ``hub`` (a :class:`jflex.Beam`) the hub is itself a clamped
 beam from ``root``; the link is clamped at the hub tip and rotated by the hub's tip slope. The
 part of the link inside the hub is carried rigidly by the robot and does not follow the hub's
 deflection (a simplification).

@@ -1,4 +1,5 @@
-"""Fractional Voigt-Kelvin damping ``F = k_e K D^alpha e`` (seed 004 Eqs. 4-15).
+"""Fractional Voigt-Kelvin damping ``F = k_e K D^alpha e`` (Eqs. 4-15 of
+"Numerical Implementation and Comparison Between the Viscous, Fractional and Hysteretic Damping Models of a Rigid-Flexible Planar Manipulator").
 
 In time, ``D^alpha`` (Riemann-Liouville, zero history) is replaced by Oustaloup's rational
 approximation of ``s^alpha`` over a stated band ``[w_lo, w_hi]`` with ``2N+1`` poles,
@@ -6,7 +7,7 @@ approximation of ``s^alpha`` over a stated band ``[w_lo, w_hi]`` with ``2N+1`` p
 $$ s^\\alpha \\approx G(s) = w_{hi}^\\alpha \\prod_{k=-N}^{N} \\frac{s + w'_k}{s + w_k},\\quad
 w'_k = w_{lo} r^{(k+N+(1-\\alpha)/2)/(2N+1)},\\ w_k = w_{lo} r^{(k+N+(1+\\alpha)/2)/(2N+1)},\\ r = w_{hi}/w_{lo}, $$
 
-(Oustaloup 1995; Valerio's toolbox, the reference [3] of seed 004), realised as ``2N+1`` first-order
+(Oustaloup 1995; Valerio's toolbox, reference [3] of that paper), realised as ``2N+1`` first-order
 states per coordinate: ``G(s) = D + sum_k r_k / (s + w_k)``. In frequency the exact
 ``(i omega)^alpha`` is used. :func:`grunwald_letnikov` is the independent time-domain reference.
 """

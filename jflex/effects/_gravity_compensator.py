@@ -1,4 +1,4 @@
-"""Gravity compensators acting on one joint (seed 003 Eqs. 2.9-2.11).
+"""Gravity compensators acting on one joint (Eqs. 2.9-2.11 of the thesis "Posture Dependent Dynamics in Robotic Machining").
 
 Both are conservative: they are written as a potential energy, so the torque they exert enters
 every analysis through the Lagrange assembly, and their stiffness ``-d tau_GC / dq`` enters the
@@ -21,7 +21,7 @@ def _joint_index(robot, joint) -> int:
 
 
 class FourierGravityCompensator(AbstractEffect):
-    """Compensator torque as a Fourier series of the joint angle (seed 003 Eq. 2.11: the cosines),
+    """Compensator torque as a Fourier series of the joint angle (the thesis' Eq. 2.11: the cosines),
     ``tau_GC = sum_k B_k cos(k q_j) + A_k sin(k q_j)``, applied to joint ``joint`` as an external
     torque.
 
@@ -57,7 +57,7 @@ class FourierGravityCompensator(AbstractEffect):
 
 
 class SpringGravityCompensator(AbstractEffect):
-    """Linear-spring compensator (seed 003 Eq. 2.9, Fig. 2.4): a spring of stiffness ``k_c``
+    """Linear-spring compensator (the thesis' Eq. 2.9, Fig. 2.4): a spring of stiffness ``k_c``
     and free length ``x0`` between point A (distance ``L`` from the joint axis on the previous
     link) and point B (distance ``r`` on the link), with ``gamma = offset - q_j`` the angle
     between O A and O B (``offset = pi/2`` gives Eq. 2.10).

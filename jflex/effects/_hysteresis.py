@@ -1,4 +1,5 @@
-"""Hysteretic damping (seed 004 Eqs. 16-27).
+"""Hysteretic damping (Eqs. 16-27 of
+"Numerical Implementation and Comparison Between the Viscous, Fractional and Hysteretic Damping Models of a Rigid-Flexible Planar Manipulator").
 
 In frequency: the complex stiffness ``K (1 + i eta sign(omega))`` (Eq. 22). In time: a
 Masing-rule element (Eqs. 25-27) with the virgin curve ``y(x) = h0 [1 - (delta/(delta + x))^2]``:
@@ -14,7 +15,7 @@ instead, i.e. ``u`` decays by ``exp(-travel / width)`` over the reverse travel, 
 as a rate-independent hysteresis should. Why: with the time-driven reset a reversal that travels
 back a nanometre for a millisecond (a higher mode's ripple on a slow swing) resets ``u`` fully, so
 the force, and every response after it, jumps as a parameter moves the ripple across zero; an
-output-error cost is then discontinuous (seed 004: factors 2-10 between neighbouring ``delta``).
+output-error cost is then discontinuous (that paper: factors 2-10 between neighbouring ``delta``).
 With the travel-driven reset the right-hand side is Lipschitz in the states (the reset term
 ``|v| u / width`` vanishes at ``v = 0`` and at ``u = 0``), a reversal of travel ``a`` changes ``u`` by
 a fraction ``~ a / width``, and the response is a continuous function of ``h0`` and ``delta``.

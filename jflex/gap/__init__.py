@@ -1,4 +1,4 @@
-"""Sim-to-real gap diagnosis (issue 6): where the gap lies, which unmodelled effect causes it,
+"""Sim-to-real gap diagnosis: where the gap lies, which unmodelled effect causes it,
 how far it shrinks once that effect is added and refitted, judged on held-out data."""
 
 from ._case import Case as Case, Dataset as Dataset, EFFECT_NAMES as EFFECT_NAMES, load_case as load_case

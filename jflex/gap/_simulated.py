@@ -1,5 +1,5 @@
 """Candidates only a simulation shows: a flexible joint seen in output-error (tip) training data,
-refitted through :func:`jflex.identify.fit` over :func:`jflex.simulate` (issue 13, item 4).
+refitted through :func:`jflex.identify.fit` over :func:`jflex.simulate`.
 
 A joint's spring with the motor's inertia on its far side changes where the tool goes under the
 applied torques, but no linear column of the measured motion holds it when the motion is not
