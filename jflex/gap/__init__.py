@@ -2,6 +2,7 @@
 how far it shrinks once that effect is added and refitted, judged on held-out data."""
 
 from ._case import Case as Case, Dataset as Dataset, EFFECT_NAMES as EFFECT_NAMES, load_case as load_case
+from ._case_init import case_init as case_init
 from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose
 from ._effect_term import EffectCandidate as EffectCandidate
 from ._noise import find_period as find_period, noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
