@@ -8,6 +8,7 @@ energies (differentiated automatically) and its non-conservative force, see
 
 from __future__ import annotations
 
+import fnmatch
 from typing import NamedTuple
 
 import equinox as eqx
@@ -16,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import has_inertia
+from ._compiled import compiled
 from ._dynamics import _crba, _rnea, forward_kinematics
 from ._errors import ShapeError
 from ._robot import PRISMATIC, Robot
@@ -111,14 +113,26 @@ def _check(model: Model, x, name):
         )
 
 
-def _effect_energy(model: Model, x, xd):
+def _effect_kinetic(model: Model, x, xd):
     r, lay = model.rigid, model.layout
     T = jnp.zeros(())
-    V = jnp.zeros(())
     for e, s in zip(model.effects, lay.slots):
         T = T + e.kinetic_energy(r, s, x, xd)
+    return T
+
+
+def _effect_potential(model: Model, x):
+    r, lay = model.rigid, model.layout
+    V = jnp.zeros(())
+    for e, s in zip(model.effects, lay.slots):
         V = V + e.potential_energy(r, s, x)
-    return T, V
+    return V
+
+
+def _effect_energy(model: Model, x, xd):
+    """``(T, V)`` of the effects. (A derivative of one of them should call
+    :func:`_effect_kinetic` or :func:`_effect_potential`: the other would be traced for nothing.)"""
+    return _effect_kinetic(model, x, xd), _effect_potential(model, x)
 
 
 def _pad(a, n, nx):
@@ -131,7 +145,7 @@ def mass_matrix(model: Model, x):
     r, lay = model.rigid, model.layout
     n, nx = r.nq, lay.nx
     M = jnp.zeros((nx, nx), dtype=x.dtype).at[:n, :n].set(_crba(r, x[:n], "mass_matrix"))
-    T = lambda xd: _effect_energy(model, x, xd)[0]
+    T = lambda xd: _effect_kinetic(model, x, xd)
     return M + jax.hessian(T)(jnp.zeros_like(x))
 
 
@@ -192,54 +206,131 @@ def model_inverse_dynamics(model: Model, t, x, xd, xdd, z):
     return mass_matrix(model, x) @ xdd + bias_forces(model, t, x, xd, z)
 
 
-class Linearization(NamedTuple):
-    """``M xdd + C xd + K x = B u`` about a posture, over the coordinates ``names``."""
+class Linearization(eqx.Module):
+    """``M xdd + C xd + K x = B u`` about a posture, over the coordinates ``names``.
+
+    ``M``, ``C``, ``K`` (nk, nk) and ``B`` (nk, n) are arrays; ``names`` (the kept coordinates)
+    and ``keep`` (their indices in ``x``) are static, so a linearisation passes through
+    ``jax.jit`` and ``jax.vmap``. It unpacks and indexes like the tuple
+    ``(M, C, K, B, names, keep)``.
+    """
 
     M: jnp.ndarray
     C: jnp.ndarray
     K: jnp.ndarray
     B: jnp.ndarray
-    names: tuple[str, ...]
-    keep: tuple[int, ...]
+    names: tuple[str, ...] = eqx.field(static=True)
+    keep: tuple[int, ...] = eqx.field(static=True)
+
+    def _astuple(self):
+        return (self.M, self.C, self.K, self.B, self.names, self.keep)
+
+    def __iter__(self):
+        return iter(self._astuple())
+
+    def __len__(self):
+        return 6
+
+    def __getitem__(self, i):
+        return self._astuple()[i]
 
 
-def _static_forces(model: Model, t, x, xd, z):
-    """Generalised forces that survive at rest: gravity, the effects' potential forces, minus
-    their small-motion forces. At xd = 0 the velocity-quadratic Lagrange terms vanish together
-    with their first derivatives, so this is all a linearisation about rest needs."""
-    r, lay = model.rigid, model.layout
-    n, nx = r.nq, lay.nx
-    rest = jnp.zeros_like(x[:n])  # (not z: that name holds the effects' states below)
-    g = _pad(_rnea(r, x[:n], rest, rest, None, "linearize"), n, nx)
-    dV = jax.grad(lambda x_: _effect_energy(model, x_, jnp.zeros_like(x_))[1])(x)
-    f = jnp.zeros(nx, dtype=x.dtype)
-    for e, s in zip(model.effects, lay.slots):
-        f = f + e.linear_force(r, s, t, x, xd, z)
-    return g + dV - f
+def resolve_hold(model: Model, hold) -> tuple[str, ...]:
+    """Names of the held coordinates.
+
+    ``hold`` is ``"actuated"`` (every coordinate an actuator drives: perfect position control,
+    e.g. the motor side of flexible joints), a name or glob pattern (``"theta_*"``), an index,
+    or a sequence of those; ``()`` or ``None`` holds nothing.
+    """
+    names = model.layout.coord_names
+    if hold is None:
+        return ()
+    if isinstance(hold, (str, int, np.integer)):
+        hold = (hold,)
+    out: list[str] = []
+    for h in hold:
+        if isinstance(h, (bool, np.bool_)) or not isinstance(h, (str, int, np.integer)):
+            raise ShapeError(f"hold: expected coordinate names, glob patterns, indices or 'actuated', got {h!r}")
+        if isinstance(h, (int, np.integer)):
+            if not 0 <= int(h) < len(names):
+                raise ShapeError(f"hold: coordinate index {h} out of range; coordinates: {list(names)}")
+            out.append(names[int(h)])
+        elif h == "actuated":
+            try:
+                with jax.ensure_compile_time_eval():
+                    B = np.asarray(input_matrix(model))
+            except jax.errors.ConcretizationTypeError:
+                raise ShapeError("hold='actuated' needs a structural input matrix; name the coordinates instead") from None
+            out += [names[i] for i in np.flatnonzero(np.abs(B).sum(axis=1) > 0)]
+        else:
+            hits = [n for n in names if fnmatch.fnmatchcase(n, h)]
+            if not hits:
+                raise ShapeError(f"hold: '{h}' matches no coordinate; coordinates: {list(names)}")
+            out += hits
+    keep = [n for n in names if n not in out]
+    if not keep:
+        raise ShapeError(f"hold: holding {sorted(set(out))} leaves no free coordinate (coordinates {list(names)})")
+    return tuple(dict.fromkeys(out))
 
 
-def linearize(model: Model, x0, *, hold: tuple[str, ...] | tuple[int, ...] = (), t=0.0) -> Linearization:
+def kept_coordinates(model: Model, hold) -> tuple[int, ...]:
+    """Indices in ``x`` of the coordinates ``hold`` (see :func:`resolve_hold`) leaves free."""
+    held = set(resolve_hold(model, hold))
+    return tuple(i for i, c in enumerate(model.layout.coord_names) if c not in held)
+
+
+def linearize(model: Model, x0, *, hold=(), t=0.0) -> Linearization:
     """Linearise the model about the static posture ``x0`` (xd = 0).
 
     ``K = d(g + dV/dx - f)/dx`` (gravity stiffness included), ``C = -df/dxd``, ``M = M(x0)``,
     where ``f`` are the effects' small-motion forces (:meth:`AbstractEffect.linear_force`).
     ``hold`` names coordinates clamped to x0 (e.g. the motor angles under perfect position
-    control): their rows and columns are removed, and only the kept ones are differentiated.
+    control): ``"actuated"``, names, glob patterns such as ``"theta_*"`` or indices, as in
+    :func:`jflex.modal_analysis` (see :func:`resolve_hold`); their rows and columns are removed,
+    and only the kept ones are differentiated.
+
+    Un-jitted, runs one compiled program per robot, model structure and ``hold`` (another
+    posture or other parameters of the same robot and effects do not trace again); jit-, vmap-
+    and grad-compatible.
     """
     _check(model, x0, "x0")
-    lay = model.layout
-    x0 = jnp.asarray(x0)
+    return _linearize(model, jnp.asarray(x0), kept_coordinates(model, hold), t)
+
+
+def _linear_forces(model: Model, t, x, xd, z):
+    """Sum of the effects' small-motion forces :meth:`AbstractEffect.linear_force` (nx,)."""
+    r, lay = model.rigid, model.layout
+    f = jnp.zeros(lay.nx, dtype=jnp.result_type(x, xd))
+    for e, s in zip(model.effects, lay.slots):
+        f = f + e.linear_force(r, s, t, x, xd, z)
+    return f
+
+
+def _linearize_impl(model: Model, x0, keep: tuple[int, ...], t) -> Linearization:
+    # The forces that survive at rest are gravity, the effects' potential forces and minus their
+    # small-motion forces (at xd = 0 the velocity-quadratic Lagrange terms vanish together with
+    # their first derivatives). Each term is differentiated on its own: gravity through its
+    # closed-form Hessian, the rest by forward mode over the kept coordinates. Differentiating
+    # their sum traced the rigid RNEA once for K and again (with zero tangents) for C: about three
+    # times the program, and its compile time.
+    r, lay = model.rigid, model.layout
+    n = r.nq
     zero = jnp.zeros_like(x0)
     z0 = initial_state(model)
-    held = set(lay.indices(hold, "linearize (hold): "))
-    keep = tuple(i for i in range(lay.nx) if i not in held)
     idx = jnp.array(keep, dtype=int)
-    embed = lambda base, sub: base.at[idx].set(sub)
-    M = mass_matrix(model, x0)[jnp.ix_(idx, idx)]
-    K = jax.jacfwd(lambda xs: _static_forces(model, t, embed(x0, xs), zero, z0)[idx])(x0[idx])
-    C = jax.jacfwd(lambda vs: _static_forces(model, t, x0, embed(zero, vs), z0)[idx])(zero[idx])
+    sub = jnp.ix_(idx, idx)
+    embed = lambda base, part: base.at[idx].set(part)
+    M = mass_matrix(model, x0)[sub]
+    Kg = jnp.zeros((lay.nx, lay.nx), dtype=x0.dtype).at[:n, :n].set(_gravity_stiffness(r, x0[:n]))[sub]
+    f_of_x = lambda xs: jax.grad(lambda y: _effect_potential(model, embed(x0, y)))(xs) \
+        - _linear_forces(model, t, embed(x0, xs), zero, z0)[idx]
+    K = Kg + jax.jacfwd(f_of_x)(x0[idx])
+    C = -jax.jacfwd(lambda vs: _linear_forces(model, t, x0, embed(zero, vs), z0)[idx])(zero[idx])
     B = input_matrix(model)
     return Linearization(M, C, K, B[idx], tuple(lay.coord_names[i] for i in keep), keep)
+
+
+_linearize = compiled(_linearize_impl)
 
 
 def dynamic_stiffness(model: Model, x0, omega, *, hold=()):
@@ -267,6 +358,13 @@ def gravity_stiffness(robot: Robot, q):
     cost outside ``jit``, where the frequency-side diagnosis calls it once per posture and
     structure.)"""
     has_inertia("gravity_stiffness", robot)
+    return _gravity_stiffness(robot, q)
+
+
+def _gravity_stiffness(robot: Robot, q):
+    if robot.mimic:  # coupled coordinates: the closed form walks joints, not coordinates
+        rest = jnp.zeros_like(q)
+        return jax.jacfwd(lambda q_: _rnea(robot, q_, rest, rest, None, "gravity_stiffness"))(q)
     n = robot.nq
     T = forward_kinematics(robot, q)
     R, o = T[:, :3, :3], T[:, :3, 3]

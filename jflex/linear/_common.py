@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-import fnmatch
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import has_inertia
 from .._dynamics import jacobian
 from .._errors import ParameterError, ShapeError
-from .._model import Model, input_matrix, linearize
+from .._model import Model, linearize, resolve_hold as resolve_hold
 from .._simulate import effect_output
 
 
@@ -34,46 +33,35 @@ def expand_posture(model: Model, posture):
     return jnp.concatenate(parts)
 
 
-def resolve_hold(model: Model, hold) -> tuple[str, ...]:
-    """Names of the held coordinates.
-
-    ``hold`` is ``"actuated"`` (every coordinate an actuator drives: perfect position control,
-    seed 003's assumption), a name or glob pattern (``"theta_*"``), an index, or a sequence of
-    those; ``()`` or ``None`` holds nothing.
-    """
-    names = model.layout.coord_names
-    if hold is None:
-        return ()
-    if isinstance(hold, (str, int, np.integer)):
-        hold = (hold,)
-    out: list[str] = []
-    for h in hold:
-        if isinstance(h, (int, np.integer)):
-            if not 0 <= int(h) < len(names):
-                raise ShapeError(f"hold: coordinate index {h} out of range; coordinates: {list(names)}")
-            out.append(names[int(h)])
-        elif h == "actuated":
-            try:
-                with jax.ensure_compile_time_eval():
-                    B = np.asarray(input_matrix(model))
-            except jax.errors.ConcretizationTypeError:
-                raise ShapeError("hold='actuated' needs a structural input matrix; name the coordinates instead") from None
-            out += [names[i] for i in np.flatnonzero(np.abs(B).sum(axis=1) > 0)]
-        else:
-            hits = [n for n in names if fnmatch.fnmatchcase(n, str(h))]
-            if not hits:
-                raise ShapeError(f"hold: '{h}' matches no coordinate; coordinates: {list(names)}")
-            out += hits
-    keep = [n for n in names if n not in out]
-    if not keep:
-        raise ShapeError(f"hold: holding {sorted(set(out))} leaves no free coordinate (coordinates {list(names)})")
-    return tuple(dict.fromkeys(out))
-
-
 def linearization(model: Model, posture, hold=()):
-    """``jflex.linearize`` at a posture (q or x0), with ``hold`` resolved (see :func:`resolve_hold`)."""
+    """``(x0, jflex.linearize(model, x0, hold=hold))`` at a posture (q or x0); ``hold`` as in
+    :func:`resolve_hold`."""
     x0 = expand_posture(model, posture)
-    return x0, linearize(model, x0, hold=resolve_hold(model, hold))
+    return x0, linearize(model, x0, hold=hold)
+
+
+def check_inertia(fn: str, model: Model) -> None:
+    """A model whose rigid robot has no inertial parameters at all (known at trace time) has no
+    modes: say so before computing (a traced robot is checked through :func:`require_mass`)."""
+    has_inertia(fn, model.rigid)
+
+
+def mass_ok(M):
+    """True where the (kept) mass matrix ``M`` is positive definite (its Cholesky factor is finite)."""
+    return jnp.all(jnp.isfinite(jnp.linalg.cholesky(M)))
+
+
+def require_mass(fn: str, ok, value):
+    """``value`` once ``ok`` (from :func:`mass_ok`) holds: a :class:`ParameterError` at once when
+    ``ok`` is concrete, an ``eqx.error_if`` on ``value`` when it is traced."""
+    msg = (f"{fn}: the mass matrix over the kept coordinates is not positive definite: a free coordinate moves "
+           "no inertia (e.g. a link with zero mass and inertia, or a motor coordinate of a flexible joint with "
+           "zero rotor_inertia); give it inertia or hold it (hold=...)")
+    if isinstance(ok, jax.core.Tracer):
+        return eqx.error_if(value, ~ok, msg)
+    if not bool(ok):
+        raise ParameterError(msg)
+    return value
 
 
 def _effect_output(model: Model, name: str):

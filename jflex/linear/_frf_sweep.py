@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import compiled
 from .._errors import ShapeError
 from .._model import Model
 from .._progress import bar
@@ -35,9 +36,10 @@ def _padded(a, n):
     return a if pad == 0 else jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)])
 
 
-# module-level programs (the model traced, the options static): repeated sweeps over the same
-# model structure reuse one compilation
-@eqx.filter_jit
+# module-level programs (the model's numbers traced, its structure, the robot's kinematics and
+# the options static, see jflex._compiled): repeated sweeps over the same robot and model
+# structure reuse one compilation
+@compiled
 def _poles(model, Q, kw):
     return jax.vmap(lambda q: pole_residue(model, q, **dict(kw)))(Q)
 

@@ -19,8 +19,9 @@ import jax
 import jax.numpy as jnp
 
 from .._errors import ShapeError
-from .._model import Model
-from ._common import linearization, tool_jacobian
+from .._compiled import compiled
+from .._model import Model, resolve_hold
+from ._common import check_inertia, linearization, mass_ok, require_mass, tool_jacobian
 from ._qep import qep_newton
 
 SOLVERS = ("eig", "newton")
@@ -149,7 +150,7 @@ def modal_analysis(
     components: str = "linear",
     solver: str = "eig",
 ) -> Modes:
-    """Modal analysis of ``model`` linearised at a posture (seed 003 Eqs. 4.4-4.13).
+    """Modal analysis of ``model`` linearised at a posture.
 
     **Arguments:**
 
@@ -157,7 +158,7 @@ def modal_analysis(
     - ``posture``: (n,) robot joint angles q0 [rad] (effect coordinates completed at rest, e.g.
       theta = q) or (nx,) all coordinates x0.
     - ``hold``: coordinates clamped at the posture: ``"actuated"`` (perfect position control of
-      every actuated coordinate: the motor side of flexible joints, seed 003's assumption),
+      every actuated coordinate: the motor side of flexible joints),
       names or glob patterns such as ``"theta_*"``, or ``()`` (free, the default).
     - ``frame``: optional frame (e.g. ``"tool"``) at which to express the mode shapes through
       its Jacobian; ``reference`` and ``components`` (``"linear"``, ``"angular"``, ``"full"``)
@@ -167,11 +168,28 @@ def modal_analysis(
       faster in posture sweeps; raises where it does not converge), see :func:`eigen`.
 
     **Returns:** :class:`Modes`; frequencies in Hz, damping ratios, complex shapes over the
-    kept coordinates and (if ``frame``) at the frame. Jit- and vmap-compatible over postures.
+    kept coordinates and (if ``frame``) at the frame. Jit- and vmap-compatible over postures;
+    an un-jitted call runs one compiled program per model structure and options. A model with
+    a free coordinate that moves no inertia (a singular mass matrix) raises
+    :class:`jflex.ParameterError` (through ``eqx.error_if`` when traced).
     """
-    x0, lin = linearization(model, posture, hold)
+    check_solver(solver)
+    check_inertia("modal_analysis", model)
+    held = resolve_hold(model, hold)
+    out, ok = _modal_program(model, jnp.asarray(posture, dtype=float), held, frame, reference, components, solver)
+    return eqx.tree_at(lambda m: m.frequency, out, require_mass("modal_analysis", ok, out.frequency))
+
+
+def _modal_impl(model, posture, held, frame, reference, components, solver):
+    x0, lin = linearization(model, posture, held)
     out = modes(lin.M, lin.C, lin.K, names=lin.names, solver=solver)
     if frame is not None:
         J = tool_jacobian(model, x0, lin.keep, frame, reference, components)
         out = eqx.tree_at(lambda m: m.tool_shape, out, J @ out.shape, is_leaf=lambda x: x is None)
-    return out
+    return out, mass_ok(lin.M)
+
+
+# one compiled program per model structure and options: the model's numbers and the posture are
+# its arguments, so un-jitted calls at other postures (or on another model of the same
+# structure) do not trace again
+_modal_program = compiled(_modal_impl)

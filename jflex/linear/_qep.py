@@ -7,8 +7,11 @@ with C~, K~ nearly diagonal, so each undamped mode is an excellent start for New
 ``(y, lambda)`` with the normalisation ``y_r = 1``. The Newton matrix is solved by elimination in
 an order (the other modes first, the mode itself last) whose pivots are bounded away from zero
 while the modes are distinct, so no pivoting and no LAPACK call per posture is needed: the whole
-solve is elementwise work that vectorises over a batch of postures. This is what makes posture
-sweeps fast; ``jnp.linalg.eig`` (LAPACK ``geev`` per matrix) costs several times more.
+solve is array work over (modes, n, n) that vectorises over a batch of postures. This is what
+makes posture sweeps fast; ``jnp.linalg.eig`` (LAPACK ``geev`` per matrix) costs several times
+more. Every mode is solved at once and the iterations and the elimination are ``lax`` loops, so
+the traced program has the same size whatever the number of coordinates (an unrolled elimination
+per mode and iteration grows as n^4 and took tens of seconds to compile for 14 coordinates).
 
 Valid for underdamped modes (complex pairs): every mode must converge to a distinct eigenvalue
 with Im > 0. Both are checked, and a posture where they fail raises (``eqx.error_if``) with the
@@ -22,50 +25,68 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 _ITERS = 5
 _TOL = 1e-8
 
 
-def _solve_ordered(A, b, r):
-    """Solve A x = b (lists of complex scalars, n x n) by Gaussian elimination eliminating every
-    index but ``r`` first and ``r`` last (static order, no pivoting)."""
-    n = len(b)
-    order = [k for k in range(n) if k != r] + [r]
-    rows = [[A[i][j] for j in order] for i in order]
-    rhs = [b[i] for i in order]
-    for k in range(n):
-        inv = 1.0 / rows[k][k]
-        for i in range(k + 1, n):
-            f = rows[i][k] * inv
-            rows[i] = [rows[i][j] - f * rows[k][j] if j > k else None for j in range(n)]
-            rhs[i] = rhs[i] - f * rhs[k]
-    x = [None] * n
-    for k in reversed(range(n)):
-        acc = rhs[k]
-        for j in range(k + 1, n):
-            acc = acc - rows[k][j] * x[j]
-        x[k] = acc / rows[k][k]
-    out = [None] * n
-    for pos, k in enumerate(order):
-        out[k] = x[pos]
-    return out
+def _orders(n):
+    """Static elimination order of each mode r: every other index first, r last (n, n)."""
+    return np.array([[k for k in range(n) if k != r] + [r] for r in range(n)], dtype=np.int32)
 
 
-def _newton_step(Kt, Ct, lam, y, r):
-    """One Newton step for mode r on (y with y_r = 1, lam) of (lam^2 I + lam Ct + Kt) y = 0.
+def _solve_ordered(A, b, order):
+    """Solve ``A[r] x = b[r]`` for every r by Gaussian elimination without pivoting in the order
+    ``order[r]`` (the permuted system is eliminated in its natural order, then permuted back).
 
-    Matrices and vectors are lists of scalars: under ``vmap`` every entry is one array over the
-    batch and every operation elementwise (tiny batched matmuls and gathers are slow on CPU)."""
-    n = len(y)
-    lam2 = lam * lam
-    Q = [[(lam2 if i == j else 0.0) + lam * Ct[i][j] + Kt[i][j] for j in range(n)] for i in range(n)]
-    F = [sum(Q[i][j] * y[j] for j in range(n)) for i in range(n)]
-    dQy = [2.0 * lam * y[i] + sum(Ct[i][j] * y[j] for j in range(n)) for i in range(n)]
+    ``A`` (m, n, n), ``b`` (m, n); ``order`` (m, n) static."""
+    m, n = b.shape
+    rows = np.arange(m)[:, None]
+    Ap = A[rows[:, :, None], order[:, :, None], order[:, None, :]]
+    bp = jnp.take_along_axis(b, jnp.asarray(order), axis=1)
+    idx = jnp.arange(n)
+
+    def eliminate(k, ab):
+        Ap, bp = ab
+        pivot_row = jax.lax.dynamic_index_in_dim(Ap, k, axis=1, keepdims=False)  # (m, n)
+        pivot = jax.lax.dynamic_index_in_dim(pivot_row, k, axis=1, keepdims=False)  # (m,)
+        col = jax.lax.dynamic_index_in_dim(Ap, k, axis=2, keepdims=False)  # (m, n)
+        f = jnp.where(idx[None, :] > k, col / pivot[:, None], 0.0)
+        bk = jax.lax.dynamic_index_in_dim(bp, k, axis=1, keepdims=False)
+        # only the columns right of the pivot matter below (the rest is never read again)
+        upd = jnp.where(idx[None, None, :] > k, f[:, :, None] * pivot_row[:, None, :], 0.0)
+        return Ap - upd, bp - f * bk[:, None]
+
+    Ap, bp = jax.lax.fori_loop(0, n, eliminate, (Ap, bp))
+
+    def substitute(j, x):
+        k = n - 1 - j
+        row = jax.lax.dynamic_index_in_dim(Ap, k, axis=1, keepdims=False)  # (m, n)
+        # the sum runs over the solved entries right of k (left of k lie eliminated entries)
+        acc = jax.lax.dynamic_index_in_dim(bp, k, axis=1, keepdims=False) - jnp.sum(jnp.where(idx > k, row, 0.0) * x, axis=1)
+        xk = acc / jax.lax.dynamic_index_in_dim(row, k, axis=1, keepdims=False)
+        return jax.lax.dynamic_update_index_in_dim(x, xk, k, axis=1)
+
+    xp = jax.lax.fori_loop(0, n, substitute, jnp.zeros_like(bp))
+    inverse = np.argsort(order, axis=1)
+    return jnp.take_along_axis(xp, jnp.asarray(inverse), axis=1)
+
+
+def _newton_step(Kt, Ct, lam, Y):
+    """One Newton step for every mode r on (y_r with y_rr = 1, lam_r) of
+    ``(lam_r^2 I + lam_r Ct + Kt) y_r = 0``; ``lam`` (n,), ``Y`` (n, n) with the modes as columns."""
+    n = lam.shape[0]
+    eye = jnp.eye(n, dtype=Kt.dtype)
+    Q = lam[:, None, None] ** 2 * eye + lam[:, None, None] * Ct + Kt  # (r, i, j)
+    Yr = Y.T  # (r, j)
+    F = jnp.einsum("rij,rj->ri", Q, Yr)
+    dQy = 2.0 * lam[:, None] * Yr + jnp.einsum("ij,rj->ri", Ct, Yr)
     # unknowns: y_k for k != r (column k of Q) and lam (column r: y_r is fixed at 1)
-    J = [[dQy[i] if j == r else Q[i][j] for j in range(n)] for i in range(n)]
-    d = _solve_ordered(J, [-f for f in F], r)
-    return lam + d[r], [y[k] + d[k] if k != r else y[k] for k in range(n)]
+    J = jnp.where(eye[:, None, :] > 0, dQy[:, :, None], Q)
+    d = _solve_ordered(J, -F, _orders(n))
+    dlam = jnp.diagonal(d)
+    return lam + dlam, Y + jnp.where(eye > 0, 0.0, d.T)
 
 
 def _start(Ct, w2):
@@ -79,33 +100,21 @@ def _start(Ct, w2):
     if n == 1:
         return lam0, jnp.eye(1, dtype=complex)
     w = jnp.sqrt(jnp.maximum(w2, 0.0))
-    lams, cols = [], []
-    for r in range(n):
-        cands = [k for k in (r - 1, r + 1) if 0 <= k < n]
-
-        def pair(k):
-            a, d = lam0[r], lam0[k]
-            b, c = -0.5 * Ct[r, k], -0.5 * Ct[k, r]
-            half = 0.5 * (a - d)
-            disc = jnp.sqrt(half * half + b * c)
-            disc = jnp.where(jnp.real(jnp.conj(half) * disc) >= 0, disc, -disc)  # the branch that tends to a
-            mu = 0.5 * (a + d) + disc
-            den = mu - d
-            yk = jnp.where(jnp.abs(den) > 0, c / jnp.where(jnp.abs(den) > 0, den, 1.0), 0.0)
-            return mu, yk
-
-        (mu, yk), k = pair(cands[0]), cands[0]
-        y = jnp.zeros(n, complex).at[r].set(1.0)
-        if len(cands) == 2:
-            mu2, yk2 = pair(cands[1])
-            use2 = jnp.abs(w[cands[1]] - w[r]) < jnp.abs(w[cands[0]] - w[r])
-            mu = jnp.where(use2, mu2, mu)
-            y = y.at[cands[0]].set(jnp.where(use2, 0.0, yk)).at[cands[1]].set(jnp.where(use2, yk2, 0.0))
-        else:
-            y = y.at[k].set(yk)
-        lams.append(mu)
-        cols.append(y)
-    return jnp.stack(lams), jnp.stack(cols, axis=1)
+    r = np.arange(n)
+    left, right = np.maximum(r - 1, 0), np.minimum(r + 1, n - 1)
+    # the neighbour: the one above when it is strictly nearer in frequency (or the only one)
+    nearer = jnp.abs(w[right] - w) < jnp.abs(w[left] - w)
+    k = jnp.where((r == 0) | ((r < n - 1) & nearer), right, left)
+    a, d = lam0, lam0[k]
+    b, c = -0.5 * Ct[r, k], -0.5 * Ct[k, r]
+    half = 0.5 * (a - d)
+    disc = jnp.sqrt(half * half + b * c)
+    disc = jnp.where(jnp.real(jnp.conj(half) * disc) >= 0, disc, -disc)  # the branch that tends to a
+    mu = 0.5 * (a + d) + disc
+    den = mu - d
+    yk = jnp.where(jnp.abs(den) > 0, c / jnp.where(jnp.abs(den) > 0, den, 1.0), 0.0)
+    Y = jnp.eye(n, dtype=complex) + jnp.where(r[:, None] == k[None, :], yk[None, :], 0.0)
+    return mu, Y
 
 
 def qep_newton(M, C, K, iters: int = _ITERS):
@@ -123,28 +132,18 @@ def qep_newton(M, C, K, iters: int = _ITERS):
     Phi = Linv.T @ U  # mass-normalised undamped modes
     Kt, Ct = Phi.T @ K @ Phi, Phi.T @ C @ Phi
 
-    def solve(Kt, Ct, w2, lam=None, Y=None, iters=iters):
-        K_, C_ = [[Kt[i, j] for j in range(n)] for i in range(n)], [[Ct[i, j] for j in range(n)] for i in range(n)]
-        if lam is None:
-            lam, Y = _start(Ct, w2)
-        lams, ys = [], []
-        for r in range(n):  # static: each mode has its own elimination order
-            lr, y = lam[r], [Y[k, r] for k in range(n)]
-            for _ in range(iters):
-                lr, y = _newton_step(K_, C_, lr, y, r)
-            lams.append(lr)
-            ys.append(jnp.stack(y))
-        return jnp.stack(lams), jnp.stack(ys, axis=1)
-
     sg = jax.lax.stop_gradient
-    lam, Y = solve(sg(Kt), sg(Ct), sg(w2))
+    Kc, Cc = sg(Kt), sg(Ct)
+    lam, Y = _start(Cc, sg(w2))
+    lam, Y = jax.lax.fori_loop(0, iters, lambda _, s: _newton_step(Kc, Cc, *s), (lam, Y))
     # one step with gradients: exact first derivatives at the converged point
-    lam, Y = solve(Kt, Ct, w2, sg(lam), sg(Y), iters=1)
+    lam, Y = _newton_step(Kt, Ct, sg(lam), sg(Y))
 
     # checks: converged residual, Im > 0, distinct eigenvalues
     eye = jnp.eye(n, dtype=Kt.dtype)
     scale = jnp.abs(lam) ** 2 + jnp.abs(lam) * jnp.max(jnp.abs(Ct)) + jnp.max(jnp.abs(Kt))
-    res = jnp.stack([jnp.linalg.norm((lam[r] ** 2 * eye + lam[r] * Ct + Kt) @ Y[:, r]) / jnp.linalg.norm(Y[:, r]) for r in range(n)])
+    R = jnp.einsum("rij,jr->ir", lam[:, None, None] ** 2 * eye + lam[:, None, None] * Ct + Kt, Y)
+    res = jnp.linalg.norm(R, axis=0) / jnp.linalg.norm(Y, axis=0)
     bad = jnp.any(~(res <= _TOL * scale)) | jnp.any(~(lam.imag > 0))
     if n > 1:
         gaps = jnp.abs(lam[:, None] - lam[None, :]) + jnp.eye(n) * jnp.inf
