@@ -16,6 +16,12 @@ Each measurement runs in a fresh Python process (imports and compile caches are 
   first ``mj_forward``; and, when ``mujoco.mjx`` is installed, its first ``mjx.forward`` compile
   on that model (the menagerie's Panda MJCF is not shipped, and nothing is downloaded).
 
+Then what a user waits for on a realistic flexible robot, each in a fresh process from ``import``
+to the first result (imports + model build + trace + compile + first run), beside the warm second
+call in the same process: the Panda with ``FlexibleJoints`` on all 7 joints (14 coordinates,
+motors held), ``jax.jit(jax.vmap(modal_analysis(..., solver="newton")))`` over a batch of
+``--batch`` postures, and ``jflex.frf_sweep`` (newton, pole-residue) on ``--n-freq`` frequencies.
+
 The linearised model is the Panda with flexible joints (``FlexibleJoints`` on all 7 joints), held
 at the motor angles (``hold="actuated"``), the modal analysis the same model at the same posture.
 The machine this runs on may be shared: rerun with ``--repeat`` and read the minimum.
@@ -116,6 +122,31 @@ print(json.dumps(out))
 """
 
 
+_USER = """
+import sys, time
+t0 = time.perf_counter()
+import json
+import jax, jax.numpy as jnp, numpy as np
+import jflex
+what, batch, nf = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+robot = jflex.load_robot("panda")
+n = robot.nq
+model = jflex.Model(robot, [jflex.effects.FlexibleJoints(jnp.full(n, 1e4), jnp.full(n, 5.0), jnp.full(n, 0.1), jnp.full(n, 50.0))])
+Q = jnp.asarray(np.random.default_rng(0).uniform(-1.0, 1.0, (batch, n)))
+if what == "modal":
+    f = jax.jit(jax.vmap(lambda q: jflex.modal_analysis(model, q, hold="actuated", solver="newton").frequency))
+    run = lambda Q: jax.block_until_ready(f(Q))
+else:
+    omega = jnp.linspace(1.0, 2000.0, nf)
+    run = lambda Q: jflex.frf_sweep(model, Q, omega, hold="actuated", progress=False)
+run(Q)
+t1 = time.perf_counter()
+run(Q + 0.01)
+t2 = time.perf_counter()
+print(json.dumps({"first_s": t1 - t0, "warm_s": t2 - t1}))
+"""
+
+
 def run_snippet(code, *args, env=None):
     out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, env=env)
     if out.returncode != 0:
@@ -147,6 +178,8 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=1, help="fresh processes per measurement (minimum reported)")
     ap.add_argument("--only", nargs="*", default=None, help="compile measurements to run (default: all)")
     ap.add_argument("--no-peers", action="store_true")
+    ap.add_argument("--batch", type=int, default=64, help="postures of the flexible Panda's modal and FRF sweeps")
+    ap.add_argument("--n-freq", type=int, default=200, help="frequencies of the flexible Panda's frf_sweep")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     results = {}
@@ -171,6 +204,13 @@ def main(argv=None):
         results["compile"][name] = row
         fmt = lambda r: f"{r['compile_s']:7.2f} s ({r['hlo_lines']:>5} l)" if "compile_s" in r else r.get("error", "-")[:18]
         print(f"{name:<40} {fmt(row['argument']):>18} {fmt(row['closed']):>18}", flush=True)
+    results["flexible_panda"] = {}
+    print(f"{'flexible Panda (14 coordinates), ' + str(args.batch) + ' postures':<40} {'first (fresh)':>18} {'warm':>18}")
+    for what, label in (("modal", "vmapped modal_analysis (newton)"), ("frf", f"frf_sweep ({args.n_freq} frequencies)")):
+        r = best([run_snippet(_USER, what, str(args.batch), str(args.n_freq)) for _ in range(args.repeat)])
+        results["flexible_panda"][label] = r
+        row = (f"{r['first_s']:16.2f} s {r['warm_s']:16.3f} s" if "first_s" in r else r.get("error", "-"))
+        print(f"{label:<40} {row}", flush=True)
     if not args.no_peers:
         results["pinocchio"] = best([run_snippet(_PIN) for _ in range(args.repeat)])
         results["mjx"] = best([run_snippet(_MJX) for _ in range(args.repeat)])
