@@ -153,6 +153,21 @@ def test_plausible_ranges_name_the_parameter_value_and_range(arm):
     assert "motor1.inertia" in cd.implausible(robot, [1.2 * hi, 0.0, 0.0], sc)
 
 
+def test_offset_range_reaches_the_modelled_torque(arm):
+    # a sensor that reports the effort net of the weight it carries reads ~0 while the model asks for
+    # the weight: an offset of that size is plausible (bounded by the larger rms), a motor inertia
+    # (bounded by the measured spread) is not widened
+    robot, _, _ = arm
+    n = robot.nq
+    sc = E.DataScale(tau_std=np.ones(n), tau_rms=np.full(n, 2.0), qd_std=np.ones(n), qdd_std=np.full(n, 4.0),
+                     qd_max=np.full(n, 3.0), dt=0.004, model_rms=np.full(n, 100.0))
+    names = robot.joint_names
+    assert E.TorqueOffset(names[:1]).implausible(robot, [-171.0], sc) is None
+    assert E.TorqueOffset(names[:1]).implausible(robot, [-201.0], sc) is not None
+    cd = E.CoupledDrive(names[4:6], [[1.0, 1.0]])
+    assert cd.plausible_ranges(robot, sc)[0][1] == pytest.approx(2.0 / (4.0 * np.sqrt(2)))
+
+
 @pytest.mark.parametrize("bad", [dict(offset=[np.nan]), dict(offset=[1.0, 2.0])])
 def test_bad_offsets_are_refused(bad):
     with pytest.raises(jflex.JFlexError, match="TorqueOffset.offset"):

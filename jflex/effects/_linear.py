@@ -31,7 +31,8 @@ class DataScale(NamedTuple):
     """What the plausible ranges are relative to, per joint (n,): the measured torque's standard
     deviation ``tau_std`` and root mean square ``tau_rms`` [N m], the joint rate's and acceleration's
     standard deviations ``qd_std`` [rad/s], ``qdd_std`` [rad/s^2] and maxima ``qd_max``; ``dt`` the
-    sample time [s]."""
+    sample time [s]; ``model_rms`` (optional) the nominal model's torque root mean square [N m] on
+    the same motion."""
 
     tau_std: np.ndarray
     tau_rms: np.ndarray
@@ -39,6 +40,7 @@ class DataScale(NamedTuple):
     qdd_std: np.ndarray
     qd_max: np.ndarray
     dt: float
+    model_rms: np.ndarray | None = None
 
     @staticmethod
     def of(t, qd, qdd, tau) -> "DataScale":
@@ -203,6 +205,11 @@ class AbstractLinearEffect(AbstractEffect):
 
 
 def torque_bound(scale: DataScale, idx, fraction: float = TORQUE_FRACTION, rms: bool = False) -> np.ndarray:
-    """``fraction`` x the measured torque's spread (std, or rms for a constant term) at joints ``idx``."""
+    """``fraction`` x the measured torque's spread (std, or rms for a constant term) at joints ``idx``.
+    A constant term is bounded by the larger of the measured and the modelled rms: a sensor that
+    reports the effort net of the weight it carries (a lifting torso's) reads near zero while the
+    model asks for the whole weight, and the offset between the two is that weight."""
     s = scale.tau_rms if rms else scale.tau_std
+    if rms and scale.model_rms is not None:
+        s = np.maximum(s, scale.model_rms)
     return fraction * np.asarray(s)[list(idx)]

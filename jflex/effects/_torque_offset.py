@@ -54,6 +54,6 @@ class TorqueOffset(AbstractLinearEffect):
         return jnp.zeros(slots.nx)  # a constant: no stiffness, no damping
 
     def plausible_ranges(self, robot, scale: DataScale):
-        # an offset cannot exceed the torque it is part of: bounded by the measured root mean square
+        # an offset cannot exceed the torque it is part of: bounded by the measured (or modelled) root mean square
         b = torque_bound(scale, joint_indices(robot, self.joints, "TorqueOffset"), rms=True)
         return [(-float(x), float(x)) for x in b]

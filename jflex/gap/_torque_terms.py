@@ -482,7 +482,7 @@ def data_scale(sets) -> DataScale:
     cat = lambda name: np.concatenate([getattr(s, name) for s in sets])
     dt = min(float(np.median(np.diff(s.t))) for s in sets)
     sc = DataScale.of(np.array([0.0, dt]), cat("qd"), cat("qdd"), cat("tau"))
-    return sc
+    return sc._replace(model_rms=np.sqrt(np.mean(cat("F0") ** 2, axis=0)))
 
 
 @eqx.filter_jit
