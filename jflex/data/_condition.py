@@ -23,6 +23,7 @@ EXCLUDE_FLAGS = ("dead", "flat", "stuck", "saturated", "few_levels")  # left out
 
 SPIKE_WINDOW = 7  # samples of the running median a spike is measured against
 SPIKE_SIGMA = 8.0  # a spike stands this many robust standard deviations off the running median
+SPIKE_SCALE_WINDOW = 201  # samples of the local noise scale a spike is judged against
 
 CUTOFF_FACTOR = 2.5  # the low-pass sits at 2.5 x the motion's band (the band's edge passes flat)
 CUTOFF_LIMIT = 0.8  # x Nyquist: the highest cutoff a record may get (its filter must still cut)
@@ -176,8 +177,11 @@ def find_spikes(x) -> np.ndarray:
     """Indices of isolated spikes in ``x`` (N,): samples more than ``SPIKE_SIGMA`` robust standard
     deviations off the running median of ``SPIKE_WINDOW`` samples (a running median keeps steps,
     such as friction reversing, and removes single-sample outliers). The scale is the larger of
-    the residual's spread (MAD) and the sample-to-sample step's (MAD / sqrt 2)."""
-    from scipy.ndimage import median_filter
+    the residual's spread (MAD) and the sample-to-sample step's (MAD / sqrt 2), each taken both
+    over the record and locally (running medians over ``SPIKE_SCALE_WINDOW`` samples): a log
+    that rests for most of its length has a near-zero spread over the record, against which the
+    ordinary noise of its moving part would all count as spikes."""
+    from scipy.ndimage import maximum_filter, median_filter
 
     x = np.asarray(x, float)
     if x.size < 3 * SPIKE_WINDOW:
@@ -188,9 +192,14 @@ def find_spikes(x) -> np.ndarray:
     d = np.diff(x)
     sig = max(1.4826 * float(np.median(np.abs(r - np.median(r)))),
               1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0))
-    if sig == 0.0:
+    w = min(SPIKE_SCALE_WINDOW, x.size) | 1
+    local = np.maximum(1.4826 * median_filter(np.abs(r), size=w, mode="nearest"),
+                       1.4826 / np.sqrt(2.0) * median_filter(np.abs(np.r_[d, d[-1]]), size=w, mode="nearest"))
+    # where the noise level changes (motion stopping), the louder side's scale holds over a window
+    scale = np.maximum(maximum_filter(local, size=w, mode="nearest"), sig)
+    if not np.any(scale > 0.0):
         return np.zeros(0, int)
-    return np.flatnonzero(np.abs(r) > SPIKE_SIGMA * sig)
+    return np.flatnonzero((scale > 0.0) & (np.abs(r) > SPIKE_SIGMA * scale))
 
 
 def replace_by_interpolation(x, idx) -> np.ndarray:
