@@ -32,6 +32,10 @@ def _words(name: str) -> list[str]:
     return re.findall(r"[a-z]+|\d+", name.lower())
 
 
+def _flat(name: str) -> str:
+    return re.sub(r"[^a-z0-9]", "", name.lower())
+
+
 def _joint_of(col: str, joints: list[str]) -> str | None:
     """The joint a header names: by its name, else by its number (``q3``: the third joint, or the
     joint whose name ends in 3)."""
@@ -63,6 +67,8 @@ def guess_columns(header: list[str], joints: list[str]) -> dict:
             continue
         role = next((r for r, ws in ROLE_WORDS.items() if any(w in ws for w in words)), None)
         j = _joint_of(col, joints)
+        if role is None and j is not None and _flat(col) == _flat(j) and header.count(col) == 1:
+            role = "position"  # a bare joint name: a log of angles headed by the joints' names
         if role is None or j is None or j in out[role]:
             continue
         out[role][j] = col
