@@ -97,6 +97,20 @@ def test_black_box_floor_does_not_count_structured_error_as_noise():
     assert np.all(sig < 2.0 * true)
 
 
+def test_black_box_floor_does_not_count_a_large_offset_as_noise():
+    # a sensor that reports a joint's effort net of the weight it lifts: the nominal residual is a
+    # constant 100 x the noise (a real arm's torso: 172 N against a torque spread of 0.65 N)
+    t, q, qd, qdd, tau = _motion(3.0, 1, seed=5)
+    model, _, _ = R.true_model("arm3")
+    F0 = TQ.rnea_batch(model, q, qd, qdd)
+    rng = np.random.default_rng(8)
+    true = 0.01 * F0.std(axis=0)
+    noise = rng.standard_normal(F0.shape) * true
+    s = types.SimpleNamespace(t=t, q=q, qd=qd, qdd=qdd, F0=F0)
+    sig, _, _ = black_box_noise(s, 100.0 * true + noise, np.ones(3, bool))
+    assert np.all(sig < 1.5 * true) and np.all(sig > 0.8 * true)
+
+
 def test_a_near_idle_joint_cannot_decide_the_pooled_gap():
     # a loaded joint (16.7 N m of torque spread, 0.3 N m error) and a near-idle one (0.28 N m,
     # 0.2 N m error: 71 % of its own spread): pooled, the gap is the signal-energy share

@@ -284,8 +284,11 @@ def black_box_noise(s, resid, m, seed: int = 0):
     err = np.zeros_like(resid)
     for f in (0, 1):
         tr, te = ids % 2 == f, ids % 2 != f
-        B = _ridge_blocks(Phi[tr], resid[tr], ids[tr])
-        err[te] = resid[te] - Phi[te] @ B
+        # the intercept is not penalised: a constant share of the residual (a sensor offset, a
+        # weight the sensor does not report) is a model error, never noise, however large it is
+        mr, mp = resid[tr].mean(axis=0), Phi[tr].mean(axis=0)
+        B = _ridge_blocks(Phi[tr] - mp, resid[tr] - mr, ids[tr])
+        err[te] = resid[te] - mr - (Phi[te] - mp) @ B
     sig = np.sqrt(np.mean(err**2, axis=0))
     dof = np.array([effective_samples(err[:, j]) if m[j] else 1.0 for j in range(n)])
     return sig, dof, dict(features=int(Phi.shape[1]), blocks=BLACK_BOX_BLOCKS)
