@@ -47,6 +47,9 @@ def test_case_reduces_the_robot_as_pinocchio_does(tmp_path, via):
     (tmp_path / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     case = load_case(tmp_path)
     assert case.robot.joint_names == ("joint1", "joint2")
+    from jflex.gap._report import robot_name
+
+    assert robot_name(case) == "arm3"  # the report title names the robot (the URDF name or the YAML stem)
     # the reduced model's inverse dynamics equal Pinocchio's, joint3 locked at -0.4 rad
     full = pin.buildModelFromXML(R.ARM3_URDF)
     red = pin.buildReducedModel(full, [full.getJointId("joint3")], np.array([0.0, 0.0, -0.4]))

@@ -20,7 +20,8 @@ def robot_name(case) -> str:
     from .._config import load_yaml
 
     try:
-        spec = str(load_yaml(case.path)["robot"])
+        spec = load_yaml(case.path)["robot"]
+        spec = str(spec["file"] if isinstance(spec, dict) else spec)  # a reduced robot: {file, joints, lock}
     except Exception:  # a name is a courtesy: never lose the report over it
         return "the robot"
     f = pathlib.Path(spec) if pathlib.Path(spec).is_absolute() else case.path.parent / spec
