@@ -104,8 +104,9 @@ def score(res: dict, truth: dict) -> dict:
         row["top1_effect"] = bool(first and any(first["effect"] == t["effect"] for t in lib))
         row["top1_joint"] = bool(first and any(first["effect"] == t["effect"] and where_ok(first, t) for t in lib))
         row["all_found"] = all(any(s["effect"] == t["effect"] and where_ok(s, t) for s in sel) for t in lib)
+    row["floor_unknown"] = verdict == "floor_unknown"  # the floor could not be measured: counted apart
     if truth["family"] == "null":
-        row["alarm"] = bool(sel) or verdict != "within_noise"
+        row["alarm"] = bool(sel) or verdict not in ("within_noise", "floor_unknown")
     if truth["family"] == "out_of_library":
         row["wrong_explained"] = verdict == "explained" and bool(sel)
     return row
