@@ -107,6 +107,24 @@ def transmission(motor, order, spec, case_file, fld):
     return tau
 
 
+def motor_angles(q, order, spec, case_file, fld):
+    """Joint angles (N, n) from the position columns ``q`` (columns in joint ``order``; rates and
+    accelerations alike): where the ``coupling`` says its joints' encoders read motor angles
+    (``angles: motor``, K x the joint angles in joint-side units once scaled), the joint angles are
+    K^-1 x them."""
+    cp = getattr(spec, "coupling", None)
+    if cp is None or getattr(cp, "angles", "joint") != "motor":
+        return q
+    missing = [j for j in cp.joints if j not in order]
+    if missing:
+        raise ConfigError(f"{case_file}: field '{fld}.coupling.joints': {missing} have no position column "
+                          f"(position joints {list(order)})")
+    q = np.array(q, float)
+    sel = [list(order).index(j) for j in cp.joints]
+    q[:, sel] = np.linalg.solve(np.asarray(cp.matrix, float), q[:, sel].T).T
+    return q
+
+
 def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
     """The :class:`Record` of the CSV data set ``spec`` (a validated ``datasets[i]`` of case.yaml)
     read from ``paths`` (one file, or several files of one run merged on time)."""
@@ -205,13 +223,14 @@ def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
         for j in torder:
             note("tau", j, cols.torque[j], "N m")
         tau = transmission(block("torque", torder), torder, spec, case_file, fld)
-        out = {"t": t, "q": block("position", pk, ang), "tau": tau, "joints": np.asarray(pk)}
+        out = {"t": t, "q": motor_angles(block("position", pk, ang), pk, spec, case_file, fld), "tau": tau,
+               "joints": np.asarray(pk)}
         for key, name in (("velocity", "qd"), ("acceleration", "qdd")):
             if getattr(cols, key) is not None:
                 if set(getattr(cols, key)) != set(pk):
                     raise ConfigError(f"{case_file}: field '{fld}.columns.{key}': expected the joints of "
                                       f"columns.position {pk}, got {list(getattr(cols, key))}")
-                out[name] = block(key, pk, ang)
+                out[name] = motor_angles(block(key, pk, ang), pk, spec, case_file, fld)
         return Record(out, channels, conditioning)
     # response: applied torques at every model joint, measured channels
     tk = keys_as("torque", names, "model joint")

@@ -123,11 +123,12 @@ def read_rosbag(path: pathlib.Path, spec, robot, case_file, fld: str) -> Record:
         raise DataError(f"{where}, messages {order[same[0]]} and {order[same[0] + 1]}: field 'header.stamp': the "
                         "same time (a time series needs strictly increasing stamps)")
     t = (ns - ns[0]) * 1e-9
-    from ._csv import transmission
+    from ._csv import motor_angles, transmission
 
-    arrays = {"q": np.asarray(q)[order], "tau": transmission(np.asarray(tau)[order], names, spec, case_file, fld)}
+    arrays = {"q": motor_angles(np.asarray(q)[order], names, spec, case_file, fld),
+              "tau": transmission(np.asarray(tau)[order], names, spec, case_file, fld)}
     if rates:
-        arrays["qd"] = np.asarray(qd)[order]
+        arrays["qd"] = motor_angles(np.asarray(qd)[order], names, spec, case_file, fld)
     t, arrays, sampling = resample_uniform(t, arrays, where, field="header.stamp")
     channels = {f"q:{j}": Channel(f"q:{j}", "rad", f"{path.name}:{topic}:position[{j}]") for j in joints}
     channels.update({f"tau:{j}": Channel(f"tau:{j}", "N m", f"{path.name}:{topic}:effort[{j}]", scale.get(j, 1.0),

@@ -187,6 +187,10 @@ class Coupling(Strict):
     matrix: list[list[float]] = Field(
         description="K (m x m): motor rates = K x joint rates, rows motors and columns joints in the order of "
                     "`joints`; joint torques = K^T x motor torques", json_schema_extra={"expects": "square list of rows"})
+    angles: Literal["joint", "motor"] = Field(
+        "joint", description="what the position columns of `joints` read: `joint` angles, or `motor` encoder "
+                             "angles (after `scale` and `offset`, in joint-side units: K x the joint angles; the "
+                             "joint angles are K^-1 x them)")
 
     @model_validator(mode="after")
     def _square(self):
