@@ -19,7 +19,7 @@ import numpy as np
 from ._checks import has_inertia
 from ._compiled import compiled
 from ._dynamics import _crba, _rnea, forward_kinematics
-from ._errors import ShapeError
+from ._errors import ParameterError, ShapeError
 from ._robot import PRISMATIC, Robot
 from ._tree import support
 from .effects._base import AbstractEffect, Slots
@@ -67,6 +67,12 @@ class Model(eqx.Module):
     def __init__(self, robot: Robot, effects=()):
         self.robot = robot
         self.effects = tuple(effects)
+        if self.effects and any(k >= 0 for k in getattr(robot, "mimic", ())):
+            # the effects index joints as coordinates; a follower joint has none of its own
+            followers = [robot.joint_names[i] for i, k in enumerate(robot.mimic) if k >= 0]
+            raise ParameterError(f"Model: effects on a robot with mimic joints ({followers} follow their leaders) "
+                                 "are not supported; lock the followers (load_urdf(..., lock={...}) or joints=[...]) "
+                                 "or load it with mimic='independent'")
 
     @property
     def rigid(self) -> Robot:
@@ -80,7 +86,7 @@ class Model(eqx.Module):
     def layout(self) -> Layout:
         r = self.rigid
         n = r.nq
-        coords = list(r.joint_names)
+        coords = list(getattr(r, "coordinate_names", r.joint_names))  # a mimic follower has no coordinate
         states: list[str] = []
         spans = []
         for e in self.effects:

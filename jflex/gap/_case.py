@@ -239,7 +239,7 @@ def _modal(arrs, path, robot):
         raise DataError(f"{path}: field 'freq': natural frequencies must be > 0 Hz")
     if z.shape != f.shape:
         raise DataError(f"{path}: field 'zeta': expected shape {f.shape} (one ratio per mode), got {z.shape}")
-    if np.any(z[np.isfinite(z)] < 0) or np.any(z[np.isfinite(z)] >= 1):
+    if np.any(z[~np.isnan(z)] < 0) or np.any(z[~np.isnan(z)] >= 1):  # NaN: not measured; +-inf is refused
         raise DataError(f"{path}: field 'zeta': damping ratios must lie in [0, 1) (a ratio, not a percentage)")
     out = {"q0": q0, "q0_extra": q0x, "freq": f, "zeta": z}
     if "shapes" in arrs:
