@@ -325,7 +325,8 @@ def sweep(
       them as a non-batched argument via ``functools.partial`` or a closure.
     - ``args``: pytrees of arrays sharing a leading batch axis of size N.
     - ``chunk_size``: items per compiled call (memory is bounded by one chunk).
-    - ``progress``: a progress bar on stderr (tqdm; drawn only when stderr is a terminal).
+    - ``progress``: progress on stderr (a tqdm bar on a terminal; otherwise a plain line at the start,
+      at most every 5 s, and at the end).
     - ``on_chunk``: ``on_chunk(start, stop, outputs)`` called with host (NumPy) outputs of each
       finished chunk.
     - ``out_dir``: if given, each finished chunk is saved as ``out_dir/chunk_<start>.npz`` at

@@ -531,7 +531,7 @@ def fit(
       iterations from a distant start) or minimiser (``optx.BFGS``; the cost is then ``0.5 |r|^2``). Jacobians are
       exact (forward/reverse-mode AD), never finite differences.
     - ``max_steps`` (per local solve); ``progress``: a tqdm bar of the steps on stderr with the
-      cost (refreshed every ``progress`` steps when an int; drawn only when stderr is a terminal;
+      cost (refreshed every ``progress`` steps when an int; off a terminal, plain lines at most every 5 s;
       ``False``: none); ``callback(step, cost, best_values)`` after each step (e.g. to checkpoint).
     - ``multistart``: ``None`` (default: one local solve from ``model``), a :class:`MultiStart`,
       or an int ``n`` (``MultiStart(n)``): sampled starts ranked by cost in one vmapped

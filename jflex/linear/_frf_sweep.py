@@ -88,7 +88,8 @@ def frf_sweep(
     - ``consume``: ``consume(start, H)`` receives each finished block, ``H`` (b, nf, p, p) a
       NumPy array for postures ``start:start + b``, valid during the call only (copy what you
       keep). Without it the result is returned whole.
-    - ``progress``: a progress bar on stderr (tqdm; drawn only when stderr is a terminal).
+    - ``progress``: progress on stderr (a tqdm bar on a terminal; otherwise a plain line at the start,
+      at most every 5 s, and at the end).
 
     **Returns:** complex (N, nf, p, p) NumPy array, or None when ``consume`` is given.
     Calls :func:`jflex.tune_allocator` first (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
