@@ -1,7 +1,7 @@
 """The frequency side of the gap diagnosis: a :class:`jflex.Model` of elastic sites at each measured
 posture, evaluated fast for the many parameter values of a fit.
 
-The motors are held (perfect position control, seed 003's assumption), so the model's free
+The motors are held (perfect position control, as the thesis "Posture Dependent Dynamics in Robotic Machining" assumes), so the model's free
 coordinates are its *elastic* ones: the link side of each flexible joint and the virtual joints
 that candidates insert into the kinematic tree (:class:`Site`):
 
@@ -825,7 +825,7 @@ PEAK_WEIGHT = 1.0  # FRF training sets also enter through their picked peaks (sm
 RECENTRE = 2  # times the FRF phase may move its box to a stiffness that ended on the edge
 # relative cost change at which an FRF fit stops: gaps are judged to 0.01 % of NRMSE; scipy's 1e-8
 # default ran most FRF fits to their evaluation cap (modal-table fits are cheap and keep it: their few
-# residuals leave flat directions that stopped early at 1e-6, e.g. seed 003's KR90 bearing 9.0 -> 9.6 %)
+# residuals leave flat directions that stopped early at 1e-6, e.g. the thesis' KR90 bearing 9.0 -> 9.6 %)
 FIT_TOL = 1e-6
 FIT_STRIDE = 4  # every 4th frequency of a measured FRF enters the fit (peaks stay resolved)
 

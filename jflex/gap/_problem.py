@@ -24,7 +24,7 @@ from . import _torque as T
 from ._torque_terms import KINDS, make_term
 
 TORQUE_EFFECTS = tuple(KINDS)
-# pairs a single data set cannot always tell apart (issue 6): reported as ambiguous when close
+# pairs a single data set cannot always tell apart: reported as ambiguous when close
 CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
                                      ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
                                      ("coulomb_friction", "backlash"), ("coulomb_friction", "stribeck_friction"),

@@ -1,4 +1,4 @@
-"""Periodic Fourier-series excitation trajectories (seed 003 Eq. 3.8, Swevers et al.) optimised
+"""Periodic Fourier-series excitation trajectories (the thesis "Posture Dependent Dynamics in Robotic Machining" Eq. 3.8, Swevers et al.) optimised
 for the condition number of the base regressor under joint, velocity, acceleration and
 workspace limits (Eqs. 3.9-3.11)."""
 

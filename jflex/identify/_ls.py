@@ -57,7 +57,7 @@ def _finish(theta, cov, sigma2, resid, cond):
 
 
 def ols(A, y) -> LSResult:
-    """Ordinary least squares ``theta = (A^T A)^-1 A^T y`` (seed 003 Eq. 3.7) with
+    """Ordinary least squares ``theta = (A^T A)^-1 A^T y`` (the thesis "Posture Dependent Dynamics in Robotic Machining" Eq. 3.7) with
     ``cov = sigma^2 (A^T A)^-1`` and ``sigma^2 = |y - A theta|^2 / (m - p)``.
 
     **Arguments:** ``A`` (m, p) full column rank (use base parameters); ``y`` (m,).

@@ -1,6 +1,6 @@
 """The identification regressor: rigid inertial parameters plus the joint-level terms that
 torque data also see (viscous and Coulomb friction, rotor armature, gravity-compensator Fourier
-terms, seed 003 Eqs. 2.11/3.1 and Appendix B).
+terms, the thesis "Posture Dependent Dynamics in Robotic Machining" Eqs. 2.11/3.1 and Appendix B).
 
 Parameters are ordered ``[pi_1 (10), ..., pi_n (10), Fv (n), Fc (n), Ia (n), B_1..B_K]``, each
 group present only when switched on; ``pi_i`` in Pinocchio's order.

@@ -69,7 +69,7 @@ class TorqueData(AbstractData):
 def model_modes(model, posture, *, hold="actuated", frame=None, reference="local_world_aligned", components="linear"):
     """Differentiable modal analysis at a posture: ``(f [Hz], zeta, shapes)`` sorted by |lambda|.
 
-    Same quantities as :func:`jflex.modal_analysis` (seed 003 Eqs. 4.10-4.13), but through
+    Same quantities as :func:`jflex.modal_analysis` (the thesis "Posture Dependent Dynamics in Robotic Machining" Eqs. 4.10-4.13), but through
     ``lax.linalg.eig(..., enable_eigvec_derivs=True)`` so that fits can differentiate
     frequencies, damping ratios and (for distinct eigenvalues) shapes. ``shapes`` (s, n_modes)
     over the kept coordinates, or at ``frame`` through its Jacobian.
@@ -111,7 +111,7 @@ class ModalData(AbstractData):
       e.g. from :func:`jflex.track_modes` when modes swap order across postures), or ``"mac"`` (default
       when shapes are given): pair each measured mode with a model mode by the best MAC at each
       posture, which survives modes swapping order while the parameters move.
-    - ``hold``, ``frame``: as in :func:`jflex.modal_analysis` (seed 003: ``hold="actuated"``).
+    - ``hold``, ``frame``: as in :func:`jflex.modal_analysis` (the thesis: ``hold="actuated"``).
     - ``weights``: ``(w_f, w_zeta, w_mac)``; frequency residuals are relative in units of
       ``frequency_scale`` (default 0.01: one percent), damping residuals absolute in units of
       ``damping_scale`` (default 0.01: one percentage point), so that by default a 1 % frequency

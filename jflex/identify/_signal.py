@@ -1,4 +1,4 @@
-"""Signal processing of measured joint positions (seed 003 section 3.2.5): FFT low-pass
+"""Signal processing of measured joint positions (the thesis "Posture Dependent Dynamics in Robotic Machining" section 3.2.5): FFT low-pass
 filtering and spectral differentiation of periodic records."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Frequency response functions at a posture (seed 003 Eqs. 4.7-4.9, seed 000 "forced response").
+"""Frequency response functions at a posture (the thesis "Posture Dependent Dynamics in Robotic Machining" Eqs. 4.7-4.9, the course notes "Manipulator modeling accounting for flexibilities" "forced response").
 
 Joint space: ``G_theta(w) = (K0 - w^2 M0 + i w C0)^-1`` (direct form) or its modal expansion
 ``sum_r psi_r psi_r^T / (a_r (i w - lambda_r))`` over the 2n eigenpairs. At a frame:
@@ -302,7 +302,7 @@ def frf(
     method: str = "direct",
     solver: str = "eig",
 ):
-    """Frequency response of ``model`` linearised at a posture (seed 003 Eqs. 4.7-4.9).
+    """Frequency response of ``model`` linearised at a posture (the thesis Eqs. 4.7-4.9).
 
     **Arguments:**
 
@@ -343,7 +343,7 @@ def frf(
 
 
 def half_power_damping(omega, H):
-    """Damping ratio of the highest peak of ``|H|`` by the half-power bandwidth (seed 000):
+    """Damping ratio of the highest peak of ``|H|`` by the half-power bandwidth (the course notes):
     ``zeta ~ (w+ - w-) / (2 w_peak)`` with ``|H(w+-)| = |H|max / sqrt 2`` (linear interpolation
     between grid points). Accurate for isolated, lightly damped modes.
 

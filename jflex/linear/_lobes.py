@@ -1,4 +1,4 @@
-"""Milling stability lobes by the zero-order analysis (seed 003 section 4.8, Eqs. 4.15-4.19;
+"""Milling stability lobes by the zero-order analysis (the thesis "Posture Dependent Dynamics in Robotic Machining" section 4.8, Eqs. 4.15-4.19;
 Altintas & Budak 1995, Altintas "Manufacturing Automation" ch. 4).
 
 Cutting coordinates: x feed, y normal to the feed in the plane of the cut, z tool axis; the
@@ -77,7 +77,7 @@ class Lobes(eqx.Module):
 
 def stability_lobes(G, omega, *, n_teeth: int, Kt, Kr=0.0, Ka=0.0, lead_angle=np.pi / 2,
                     phi_start=0.0, phi_exit=np.pi / 2, n_lobes: int = 10) -> Lobes:
-    """ZOA stability lobes from a tool FRF in cutting coordinates (seed 003 Eqs. 4.16-4.19).
+    """ZOA stability lobes from a tool FRF in cutting coordinates (the thesis Eqs. 4.16-4.19).
 
     **Arguments:**
 

@@ -1,4 +1,4 @@
-"""Modal Assurance Criterion (seed 003 Eq. 4.14), mode pairing and mode tracking across postures.
+"""Modal Assurance Criterion (the thesis "Posture Dependent Dynamics in Robotic Machining" Eq. 4.14), mode pairing and mode tracking across postures.
 
 Pairing modes (:func:`pair_modes`): reference modes (measured, or the model's own at a reference
 posture) are assigned one-to-one to model modes by a linear assignment (Hungarian algorithm,
@@ -13,7 +13,7 @@ frequencies. Pairing by frequency alone goes wrong where close modes trade place
 order while keeping their shapes (the Kuka KR90's modes 1 and 2 between its configurations 1 and
 2), which MAC against the reference shapes follows. Tracking a path of postures step by step
 (:func:`track_modes`) is a different question, "which mode continues into which", and can follow
-a veering pair onto the other branch; the seed-003 tables label rows by shape likeness to
+a veering pair onto the other branch; the thesis' tables label rows by shape likeness to
 configuration 1, which :func:`pair_modes` against configuration 1's shapes reproduces.
 """
 

@@ -1,4 +1,4 @@
-"""Modal analysis at a posture: the first-order generalised eigenproblem of seed 003
+"""Modal analysis at a posture: the first-order generalised eigenproblem of the thesis "Posture Dependent Dynamics in Robotic Machining"
 Eqs. 4.10-4.13 (state-space form of ``M0 x'' + C0 x' + K0 x = 0``).
 
 For ``(lambda^2 M + lambda C + K) psi = 0`` the state vectors are ``[psi; lambda psi]``; the
@@ -8,7 +8,8 @@ $$ f_r = |\\lambda_r| / 2\\pi, \\qquad \\zeta_r = -\\mathrm{Re}\\,\\lambda_r / |
 
 (Eq. 4.12). Each mode also carries ``a_r = psi_r^T (2 lambda_r M + C) psi_r``, the
 normalisation of the modal expansion ``H(s) = sum_r psi_r psi_r^T / (a_r (s - lambda_r))`` over
-all 2n eigenpairs (seed 000's expansion for non-proportional damping), and a modal mass
+all 2n eigenpairs (the expansion for non-proportional damping of the course notes "Manipulator
+modeling accounting for flexibilities"), and a modal mass
 ``mu_r = a_r / (2 i w_d,r)``, which is ``psi_r^T M psi_r`` for proportional damping.
 """
 
