@@ -11,7 +11,7 @@ import types
 import numpy as np
 import pytest
 
-from jflex.gap import find_period, forward_select, worse_channels
+from jflex.gap import MIN_NAMED_SHRINK, find_period, forward_select, worse_channels
 from jflex.gap._noise import black_box_noise, periodic_noise
 from jflex.gap._problem import pooled_gap
 
@@ -146,3 +146,28 @@ def test_an_effect_that_makes_a_joint_worse_is_not_taken():
                          n_params=lambda c: 1, max_effects=1, channel_floor=cfloor,
                          implausible=lambda c, st: "play 0.144 rad" if c == "offset" else None)
     assert sel.steps == [] and {c for _, c, _ in sel.vetoed} == {"delay", "offset"}
+
+
+def test_an_effect_confined_to_one_joint_is_named_on_that_joints_evidence():
+    # a coupled wrist drive (the Staubli TX40's joints 5 and 6, read from its real log): joint 5
+    # carries 0.3 % of the torque energy, so the pooled shrink is small, but the drive brings joint
+    # 5 from 296 % to 65 % against its own floor of 94 %, makes no joint worse, and the held-out
+    # criterion is decisive
+    from jflex.gap import resolved_channels
+
+    ch0 = {"j1": 30.0, "j2": 20.0, "j5": 296.0, "j6": 55.0}
+    ev0 = {"v": {"kind": "torque", "nrmse": 24.1, "neff": 13500.0, "channels": ch0}}
+    drive = {"v": {"kind": "torque", "nrmse": 20.0, "neff": 13500.0, "channels": dict(ch0, j5=65.0, j6=41.0)}}
+    noise = {"v": {"kind": "torque", "nrmse": 24.0, "neff": 13500.0, "channels": dict(ch0, j1=29.9)}}
+    floor, cfloor = {"v": 13.2}, {"v": {"j1": 25.0, "j2": 18.0, "j5": 93.6, "j6": 50.0}}
+    assert [r["channel"] for r in resolved_channels(drive, ev0, cfloor)] == ["j5"]
+    assert resolved_channels(noise, ev0, cfloor) == []
+    run = lambda cands: forward_select((), ev0, floor, cands, lambda st, c: (st + (c,), {"drive": drive, "noise": noise}[c]),
+                                       n_params=lambda c: 3, max_effects=3, channel_floor=cfloor,
+                                       min_first_shrink=MIN_NAMED_SHRINK)
+    sel = run(["drive", "noise"])
+    assert [st.cand for st in sel.steps] == ["drive"]
+    # the pooled rule alone would not have named it (it closes under half of the pooled excess)
+    assert sel.steps[0].step_shrink < MIN_NAMED_SHRINK
+    # without the joint it resolves, a candidate as small in the pool is not named
+    assert run(["noise"]).steps == []

@@ -23,6 +23,7 @@ from ._selection import (
     rank_entries as rank_entries,
     step_record as step_record,
     verdict as verdict,
+    resolved_channels as resolved_channels,
     vetoed as vetoed,
     worse_channels as worse_channels,
 )

@@ -60,6 +60,27 @@ def worse_channels(ev_new, ev_old, channel_floor=None) -> list:
     return out
 
 
+def resolved_channels(ev_new, ev_old, channel_floor=None) -> list:
+    """The torque channels (joints) that a model evaluated as ``ev_new`` brings from beyond their
+    own noise (``before > SIGNIFICANCE x floor + MIN_GAP``) to within it (``after <= floor``), with
+    ``floor`` the channel's floor [%] (``channel_floor[set][channel]``). A gap confined to one
+    joint carries little of the pooled torque energy (a wrist joint of an industrial arm: 0.3 %),
+    so the pooled shrink alone can leave it unnamed. Returns ``[dict(dataset, channel, before,
+    after, floor)]``."""
+    out = []
+    cf = channel_floor or {}
+    for k, r in ev_new.items():
+        if r.get("kind") != "torque" or k not in ev_old:
+            continue
+        for ch, after in r["channels"].items():
+            before, fl = ev_old[k]["channels"].get(ch), cf.get(k, {}).get(ch)
+            if before is None or fl is None or not fl > 0:
+                continue
+            if before > SIGNIFICANCE * fl + MIN_GAP and after <= fl:
+                out.append(dict(dataset=k, channel=ch, before=float(before), after=float(after), floor=float(fl)))
+    return out
+
+
 # held-out information-criterion gain (BIC form, :func:`ic_delta`) at which the validation data
 # themselves decide that a candidate's effect is there, whatever the floor estimate says: a gap
 # just inside SIGNIFICANCE x floor + MIN_GAP that one effect closes to the floor with this much
@@ -195,6 +216,12 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
     - ``implausible(cand, state) -> str | None``: optional; a candidate whose fit it calls
       implausible is never taken.
     Candidates passed over for either reason are listed in ``Selection.vetoed``.
+
+    Beside the pooled rules, a candidate is taken on the evidence of one joint: when it is decisive
+    (held-out score >= ``DECISIVE_SCORE``), makes no joint worse and brings some joint from beyond
+    its own floor to within it (:func:`resolved_channels`), it is named even if it closes less than
+    ``min_first_shrink`` / ``MIN_STEP_SHRINK`` of the pooled excess, or the pooled gap is already
+    within noise (a coupled wrist drive seen on the wrist joints alone).
     """
     sig_ = lambda ev: is_significant(ev, floor, upper)
     vetoes = []
@@ -220,6 +247,7 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
         _, _, exc_cur = gap_summary(ev_cur, floor)
         pool = candidates(state, len(steps)) if callable(candidates) else candidates
         best = None
+        local = None  # the best decisive candidate that resolves some joint on its own (see above)
         for c in pool:
             if c in chosen:
                 continue
@@ -240,15 +268,29 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
                     key = (-np.inf, -np.inf)
             if best is None or key > best[0]:
                 best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink)))
+            if score >= DECISIVE_SCORE and resolved_channels(ev, ev_cur, channel_floor):
+                if local is None or score > local.score:
+                    local = Step(c, st, ev, ev_cur, float(score), float(step_shrink))
         if best is None:
             return _with(vetoes, on_probation("no candidate") if weak else Selection(steps, state, ev_cur, "no candidate"))
         step = best[1]
+        on_joint = False
+        if steps and not sig_(ev_cur):
+            # the pooled gap is within noise but a joint is not: only a candidate that resolves a
+            # joint on its own evidence may still be taken
+            if local is None:
+                return _with(vetoes, on_probation("within noise") if weak else Selection(steps, state, ev_cur, "within noise"))
+            step, on_joint = local, True
+        elif local is not None and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK
+                                  or (not steps and step.step_shrink < (min_first_shrink(step) if callable(min_first_shrink)
+                                                                         else min_first_shrink))):
+            step, on_joint = local, True
         if weak and step.score < DECISIVE_SCORE:
             return _with(vetoes, on_probation("too small"))
-        if step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK:
+        if not on_joint and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK):
             return _with(vetoes, Selection(steps, state, ev_cur, "too small", step))
         need = min_first_shrink(step) if callable(min_first_shrink) else min_first_shrink
-        if not steps and step.step_shrink < need:
+        if not steps and step.step_shrink < need and not on_joint:
             if step.score < DECISIVE_SCORE:
                 return _with(vetoes, Selection(steps, state, ev_cur, "weak", step))
             weak = (step, need)
@@ -268,8 +310,18 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             weak, new = None, steps
         for st_ in new if on_select is not None else ():
             on_select(st_)
-        if not sig_(ev_cur):
+        if not sig_(ev_cur) and not _beyond_own_floor(ev_cur, channel_floor):
             return _with(vetoes, Selection(steps, state, ev_cur, "within noise"))
+
+
+def _beyond_own_floor(ev, channel_floor) -> bool:
+    """Whether some torque channel still lies beyond its own floor (``SIGNIFICANCE`` x it +
+    ``MIN_GAP``): the pooled gap within noise does not end the search then (only a candidate that
+    resolves such a joint can still be taken, :func:`resolved_channels`)."""
+    cf = channel_floor or {}
+    return any(r.get("kind") == "torque" and any(v > SIGNIFICANCE * cf[k][ch] + MIN_GAP
+                                                for ch, v in r["channels"].items() if cf.get(k, {}).get(ch, 0) > 0)
+               for k, r in ev.items())
 
 
 def _with(vetoes, sel: Selection) -> Selection:
