@@ -370,3 +370,25 @@ def test_a_response_log_with_jitter_is_resampled(tmp_path):
     # linear interpolation of a 3 Hz sine sampled at 500 Hz: error below h^2/8 |y''| (steps up to 1.4 h)
     bound = (1.4 * h) ** 2 / 8 * 0.1 * (2 * np.pi * 3) ** 2
     assert np.abs(d.arrays["y"][:, 0] - 0.1 * np.sin(2 * np.pi * 3 * tt - 0.3)).max() < bound
+
+
+def test_given_cutoff_reads_the_torque_noise_below_it(tmp_path, monkeypatch):
+    # an angle spectrum that decays smoothly never meets the angle-noise level: the motion band
+    # read off it runs up to Nyquist (2.5 kHz on a real 5 kHz log), and the torque-noise band (1.5-4
+    # x it) lay above Nyquist, reading 0 N m under a given 100 Hz cutoff; the band now follows the
+    # given cutoff when the motion band does not lie below it
+    import jflex.gap._torque as T
+    from jflex.gap._torque import torque_set
+
+    monkeypatch.setattr(T, "motion_band", lambda q, h, sig: 0.48 / h)  # the estimator's failure
+
+    traj, fs = _motion(3), 500.0
+    t = np.arange(int(8 * fs)) / fs
+    noise = 0.05 * np.random.default_rng(4).standard_normal((t.size, 3))
+    _write_csv(tmp_path / "log.csv", t, _log_cols(traj, t, _pin_tau(traj, t) + noise))
+    case = load_case(_case(tmp_path, [_torque_entry("log.csv", "train"), _torque_entry("log.csv", "validation", name="v")],
+                           options={"filter_cutoff_hz": 20.0}))
+    s = torque_set(case.robot, case.datasets[0], cutoff_hz=20.0)
+    got = np.asarray(s.processing["torque_noise_nm"])
+    # white noise of std 0.05 through a 20 Hz low-pass at 500 Hz keeps about sqrt(20 / 250) of it
+    assert np.all(got > 0.3 * 0.05 * np.sqrt(20 / 250)) and np.all(got < 3 * 0.05 * np.sqrt(20 / 250)), got

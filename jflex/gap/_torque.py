@@ -147,7 +147,10 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
                                 limit=CUTOFF_LIMIT)
         f_b = fc / CUTOFF_FACTOR  # the band the cutoff stands for (the motion band, or the fallback's)
     else:
-        fc, cut, f_b = float(cutoff_hz), {"method": "given (options.filter_cutoff_hz)", "nyquist_hz": nyq}, f_m
+        fc, cut = float(cutoff_hz), {"method": "given (options.filter_cutoff_hz)", "nyquist_hz": nyq}
+        # the band the given cutoff stands for: the motion band when it lies below the cutoff, else
+        # (a band read off a spectrum that never meets the angle noise) the cutoff's own
+        f_b = f_m if 0 < f_m < fc else fc / CUTOFF_FACTOR
         if not 0 < fc < 0.9 * nyq:
             raise DataError(f"{ds.name}: the low-pass cutoff {fc:.3g} Hz must lie below 0.9 x the Nyquist frequency "
                             f"{nyq:.3g} Hz of this record{' after decimation' if decimate > 1 else ''} "
