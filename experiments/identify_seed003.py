@@ -61,7 +61,7 @@ class IdentifySeed003Config(_Strict):
     max_steps: Annotated[int, Field(ge=1)] = 100
 
 
-# --- the seed-003 model: jflex.Seed003Robot (shared with posture_modal, seed003_prediction, gap_seed003)
+# --- the thesis' model: jflex.Seed003Robot (shared with posture_modal, seed003_prediction, gap_seed003)
 
 
 def errors(f, z, th, configs):

@@ -78,7 +78,7 @@ class PostureModalConfig(_Strict):
     lobes: LobesConfig
 
 
-# the seed-003 robots (DH, base parameters, flexible joints, EMA postures) live in the library
+# the thesis' robots (DH, base parameters, flexible joints, EMA postures) live in the library
 Seed003Robot = jflex.Seed003Robot
 
 
