@@ -117,3 +117,23 @@ def test_modal_analysis_of_a_robot_without_inertia_raises():
         jflex.modal_analysis(no_rotor, Q)
     with pytest.raises(Exception, match="not positive definite"):
         jax.jit(lambda m: jflex.modal_analysis(m, Q).frequency)(no_rotor).block_until_ready()
+
+
+def test_a_nearly_zero_joint_stiffness_finishes_and_says_what_it_found():
+    # a spring of 1e-9 N m/rad at the vertical first joint leaves that link free about its axis
+    # (with its damper: an overdamped, near-zero pole); neither solver hangs (a case with such a
+    # nominal stiffness once ran past 300 s): eig returns finite modes, newton returns them or
+    # names the solver that can
+    n = 3
+    soft = jflex.Model(_robot("soft"), [FlexibleJoints(jnp.array([1e-9, 1e4, 1e4]), jnp.full(n, 5.0), jnp.full(n, 0.1),
+                                                       jnp.full(n, 50.0))])
+    md = jflex.modal_analysis(soft, Q, hold="actuated", solver="eig")
+    f = np.asarray(md.frequency)
+    assert np.all(np.isfinite(f)) and np.all(np.isfinite(np.asarray(md.damping_ratio)))
+    stiff = jflex.modal_analysis(_model_of(_robot("soft")), Q, hold="actuated", solver="eig")
+    assert f.min() < 1e-2 * float(np.asarray(stiff.frequency).min())  # the soft joint's mode, near 0 Hz
+    try:
+        mn = jflex.modal_analysis(soft, Q, hold="actuated", solver="newton")
+        assert np.all(np.isfinite(np.asarray(mn.frequency)))
+    except Exception as exc:  # raised inside the compiled program (eqx.error_if): names the solver to use
+        assert "solver='eig'" in str(exc)
