@@ -304,12 +304,12 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
         tab = TABLE[rob.name]
         ef_th, ez_th = thesis_rows(rob)
         extra = list(entry.get("extra_modes_configuration1_Hz", []))
-        out = {"rotor_model": how, "thesis_table": f"Table {tab} of the thesis \"Posture Dependent Dynamics in Robotic Machining\"",
+        out = {"rotor_model": how, "thesis_table": f"the thesis \"Posture Dependent Dynamics in Robotic Machining\", Table {tab}",
                "thesis_reported_mean_frequency_error_pct": {
                    "value": float(rob.thesis["mean_frequency_error_pct"]),
                    "source": f"section 4.7 of the MASc thesis \"Posture Dependent Dynamics in Robotic Machining\", text under Table {tab}",
                    "averaging": "all nine rows" if rob.name == "staubli_tx200" else "configurations 2-3 (six rows)"},
-               "thesis_rows": [dict(configuration=k + 1, row=i + 1, source=f"Table {tab} of the thesis \"Posture Dependent Dynamics in Robotic Machining\", configuration {k + 1}, row {i + 1}",
+               "thesis_rows": [dict(configuration=k + 1, row=i + 1, source=f"the thesis \"Posture Dependent Dynamics in Robotic Machining\", Table {tab}, configuration {k + 1}, row {i + 1}",
                                     frequency_exp_Hz=float(rob.thesis["frequency_exp_Hz"][k, i]),
                                     frequency_model_Hz=float(rob.thesis["frequency_model_Hz"][k, i]),
                                     frequency_error_pct=float(ef_th[k, i]), damping_exp_pct=float(rob.thesis["damping_exp_pct"][k, i]),
@@ -324,7 +324,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
             sp = dict(fitted_configurations=split, predicted_configurations=[c + 1 for c in test],
                       thesis_heldout_mean_frequency_error_pct=float(ef_th[test].mean()),
                       thesis_heldout_mean_damping_error_pct_points=float(ez_th[test].mean()),
-                      thesis_source=f"Table {tab} of the thesis \"Posture Dependent Dynamics in Robotic Machining\", configurations {', '.join(str(c + 1) for c in test)}, rows 1-3 (Model vs Exp.)",
+                      thesis_source=f"the thesis \"Posture Dependent Dynamics in Robotic Machining\", Table {tab}, configurations {', '.join(str(c + 1) for c in test)}, rows 1-3 (Model vs Exp.)",
                       models={})
             variants = [Variant("K,C refit", base, rob.postures, hold, kc_spec(False), [])]
             if cfg.get("diagnose", True):
