@@ -14,6 +14,7 @@ import os
 import pathlib
 
 from ._errors import ConfigError
+from ._paths import output_folder
 
 ENV_VAR = "JFLEX_CACHE_DIR"
 
@@ -44,13 +45,7 @@ def enable_compilation_cache(path: str | os.PathLike | None = None, *, min_compi
     To clear the cache, delete the folder; to move it, move the folder and pass the new ``path``
     (or set ``JFLEX_CACHE_DIR``). Programs compiled before this call are not stored.
     """
-    folder = pathlib.Path(path).expanduser() if path is not None else default_cache_dir()
-    if folder.exists() and not folder.is_dir():
-        raise ConfigError(f"enable_compilation_cache: path {str(folder)!r} is a file, not a folder")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError(f"enable_compilation_cache: path {str(folder)!r} cannot be created ({exc})") from None
+    folder = output_folder(path if path is not None else default_cache_dir(), "enable_compilation_cache: path")
     if not os.access(folder, os.W_OK):
         raise ConfigError(f"enable_compilation_cache: path {str(folder)!r} is not writable")
     if not min_compile_time_s >= 0:

@@ -1,5 +1,5 @@
 """Where the configs and experiment scripts that ship with jflex are, in a source checkout and
-once installed.
+once installed; and the folders jflex writes into (made on demand, or refused by name).
 
 A checkout keeps them at its top (``configs/``, ``experiments/``, beside ``jflex/``); a wheel
 carries the same folders inside the package (``jflex/configs``, ``jflex/experiments``, see
@@ -9,6 +9,8 @@ carries the same folders inside the package (``jflex/configs``, ``jflex/experime
 from __future__ import annotations
 
 import pathlib
+
+from ._errors import ConfigError
 
 _PACKAGE = pathlib.Path(__file__).resolve().parent
 
@@ -25,3 +27,16 @@ def shipped_dirs(kind: str) -> list[pathlib.Path]:
     if (root / "pyproject.toml").is_file() and (root / kind).is_dir():
         found.append(root / kind)
     return found
+
+
+def output_folder(path, field: str) -> pathlib.Path:
+    """``path`` as an existing folder (created with its parents if missing), or a
+    :class:`ConfigError` naming ``field`` when it is a file or cannot be created."""
+    folder = pathlib.Path(path).expanduser()
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{field} {str(folder)!r} is a file, not a folder: pass a folder (it is created if missing)")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"{field} {str(folder)!r} cannot be created as a folder ({type(exc).__name__}: {exc})") from None
+    return folder

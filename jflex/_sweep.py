@@ -30,6 +30,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ._allocator import tune_allocator
 from ._errors import ConfigError, DataError, ShapeError
 from ._fingerprint import fingerprint
+from ._paths import output_folder
 from ._progress import bar
 
 _MANIFEST = "sweep.json"
@@ -427,16 +428,7 @@ def sweep(
 
 def _out_folder(out_dir):
     """``out_dir`` as a folder that exists, or a :class:`ConfigError` naming it."""
-    if out_dir is None:
-        return None
-    path = pathlib.Path(out_dir)
-    if path.exists() and not path.is_dir():
-        raise ConfigError(f"sweep: out_dir {str(path)!r} is a file, not a folder: pass a folder (it is created if missing)")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError(f"sweep: out_dir {str(path)!r} cannot be created as a folder ({type(exc).__name__}: {exc})") from None
-    return path
+    return None if out_dir is None else output_folder(out_dir, "sweep: out_dir")
 
 
 def _identity(fn, args, N, chunk, key) -> dict:
