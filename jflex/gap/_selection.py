@@ -47,17 +47,22 @@ def worse_channels(ev_new, ev_old, channel_floor=None) -> list:
     Returns ``[dict(dataset, channel, before, after, floor)]``."""
     out = []
     cf = channel_floor or {}
+    for k, ch, before, after in _channel_changes(ev_new, ev_old):
+        fl = max(float(cf.get(k, {}).get(ch, 0.0)), WORSE_MIN)
+        if after > before + fl:
+            out.append(dict(dataset=k, channel=ch, before=before, after=after, floor=fl))
+    return out
+
+
+def _channel_changes(ev_new, ev_old):
+    """``(set, channel, before, after)`` [%] of every torque channel evaluated in both."""
     for k, r in ev_new.items():
         if r.get("kind") != "torque" or k not in ev_old:
             continue
         for ch, after in r["channels"].items():
             before = ev_old[k]["channels"].get(ch)
-            if before is None:
-                continue
-            fl = max(float(cf.get(k, {}).get(ch, 0.0)), WORSE_MIN)
-            if after > before + fl:
-                out.append(dict(dataset=k, channel=ch, before=float(before), after=float(after), floor=fl))
-    return out
+            if before is not None:
+                yield k, ch, float(before), float(after)
 
 
 def resolved_channels(ev_new, ev_old, channel_floor=None) -> list:
@@ -69,15 +74,10 @@ def resolved_channels(ev_new, ev_old, channel_floor=None) -> list:
     after, floor)]``."""
     out = []
     cf = channel_floor or {}
-    for k, r in ev_new.items():
-        if r.get("kind") != "torque" or k not in ev_old:
-            continue
-        for ch, after in r["channels"].items():
-            before, fl = ev_old[k]["channels"].get(ch), cf.get(k, {}).get(ch)
-            if before is None or fl is None or not fl > 0:
-                continue
-            if before > SIGNIFICANCE * fl + MIN_GAP and after <= fl:
-                out.append(dict(dataset=k, channel=ch, before=float(before), after=float(after), floor=float(fl)))
+    for k, ch, before, after in _channel_changes(ev_new, ev_old):
+        fl = cf.get(k, {}).get(ch)
+        if fl is not None and fl > 0 and before > SIGNIFICANCE * fl + MIN_GAP and after <= fl:
+            out.append(dict(dataset=k, channel=ch, before=before, after=after, floor=float(fl)))
     return out
 
 
@@ -230,6 +230,7 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
     steps, state, ev_cur, chosen = [], state0, ev0, []
     _, _, exc0 = gap_summary(ev0, floor)
     weak = None  # (first step, share it had to close) while a decisive but partial first effect is on probation
+    need_of = min_first_shrink if callable(min_first_shrink) else (lambda step: min_first_shrink)
 
     def on_probation(stop):
         # the effects taken since a decisive first step that closed too little must close the share
@@ -282,14 +283,13 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
                 return _with(vetoes, on_probation("within noise") if weak else Selection(steps, state, ev_cur, "within noise"))
             step, on_joint = local, True
         elif local is not None and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK
-                                  or (not steps and step.step_shrink < (min_first_shrink(step) if callable(min_first_shrink)
-                                                                         else min_first_shrink))):
+                                  or (not steps and step.step_shrink < need_of(step))):
             step, on_joint = local, True
         if weak and step.score < DECISIVE_SCORE:
             return _with(vetoes, on_probation("too small"))
         if not on_joint and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK):
             return _with(vetoes, Selection(steps, state, ev_cur, "too small", step))
-        need = min_first_shrink(step) if callable(min_first_shrink) else min_first_shrink
+        need = need_of(step)
         if not steps and step.step_shrink < need and not on_joint:
             if step.score < DECISIVE_SCORE:
                 return _with(vetoes, Selection(steps, state, ev_cur, "weak", step))
