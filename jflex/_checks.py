@@ -5,9 +5,16 @@ raises a :class:`jflex.DataError` or :class:`jflex.ParameterError` at once. Trac
 ``jit``, ``vmap``, ``grad``) go through one ``eqx.error_if`` per call, which raises at run time
 with the same message (an ``EqxRuntimeError`` / ``XlaRuntimeError``): a single ``isfinite(...).all()``
 reduction and one conditional, whatever the batch.
+
+Inside a batch program (:func:`jflex.batched`) the same checks are *collected* instead
+(:func:`collecting`): each predicate becomes an output flag of the program and the host raises its
+message after the call. An ``eqx.error_if`` is a callback from the compiled program into Python;
+on a GPU every call would then hand control back to the host from inside the kernel.
 """
 
 from __future__ import annotations
+
+import contextvars
 
 import equinox as eqx
 import jax
@@ -22,14 +29,43 @@ def traced(a) -> bool:
     return isinstance(a, jax.core.Tracer)
 
 
+# while a batch program is traced: the (predicate, message) pairs of its guards, in order
+_COLLECTED: contextvars.ContextVar[list | None] = contextvars.ContextVar("jflex_collected_checks", default=None)
+
+
 def guard(x, preds, msgs):
-    """``x`` carrying a run-time check: raises ``msgs[k]`` for the first true ``preds[k]``."""
+    """``x`` carrying a run-time check: raises ``msgs[k]`` for the first true ``preds[k]``
+    (collected as flags instead while :func:`collecting` traces a batch program)."""
     if not preds:
+        return x
+    collected = _COLLECTED.get()
+    if collected is not None:
+        collected.extend((jnp.any(p), m) for p, m in zip(preds, msgs))
         return x
     if len(preds) == 1:
         return eqx.error_if(x, preds[0], msgs[0])
     bad = jnp.stack([jnp.any(p) for p in preds])
     return eqx.branched_error_if(x, jnp.any(bad), jnp.argmax(bad), msgs)
+
+
+def collecting(fn, messages: list):
+    """``fn`` returning ``(out, flags)``: ``flags[k]`` is the ``k``-th check of its guards (true:
+    failed), whose message is appended to ``messages`` when ``fn`` is traced. Every trace of one
+    program makes the same checks in the same order, so ``messages`` is filled once."""
+
+    def item(*args):
+        token = _COLLECTED.set([])
+        try:
+            out = fn(*args)
+            found = _COLLECTED.get()
+        finally:
+            _COLLECTED.reset(token)
+        if not messages:
+            messages.extend(m for _, m in found)
+        flags = jnp.stack([p for p, _ in found]) if found else jnp.zeros((0,), bool)
+        return out, flags
+
+    return item
 
 
 def _check_concrete(fn: str, name: str, a) -> None:

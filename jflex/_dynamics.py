@@ -181,11 +181,13 @@ def _state_derivative(core, matrices):
             dense = [jax.tree_util.tree_map(_instantiate, p, t, is_leaf=zero) for p, t in zip(primals, tangents)]
             return jax.jvp(lambda *a: core(robot, *a), primals, tuple(dense))
         y = core(robot, *primals)
-        out = jnp.zeros_like(y)
+        flagged = isinstance(y, tuple)  # (value, check): the check (0 or 1) has no derivative
+        value = y[0] if flagged else y
+        out = jnp.zeros_like(value)
         for mat, t in zip(matrices(robot, *primals), tangents[:3]):
             if not zero(t):
                 out = out + mat @ t
-        return y, out
+        return y, ((out, jnp.zeros_like(y[1])) if flagged else out)
 
     f.defjvp(rule, symbolic_zeros=True)
     return f
@@ -511,10 +513,17 @@ def aba(robot: Robot, q, qd, tau, f_ext=None):
         return _fd_crba(robot, q, qd, tau, f_ext, "aba")
     moving_inertia("aba", robot)
     q, qd, tau, f_ext = _checked("aba", robot, q=q, qd=qd, tau=tau, f_ext=f_ext)
-    return (_aba_analytic if _concrete(robot) else lambda *a: _aba_core(*a, "aba"))(robot, q, qd, tau, f_ext)
+    if not _concrete(robot):
+        return _aba_core(robot, q, qd, tau, f_ext, "aba")
+    # the singular-inertia check leaves the custom JVP as a value and is made outside it, where a
+    # batch program can return it as a flag (jflex.batched) instead of calling back into Python
+    out, singular = _aba_analytic(robot, q, qd, tau, f_ext)
+    return guard(out, [singular > 0], [_SINGULAR.format(fn="aba")])
 
 
-_aba_analytic = _state_derivative(lambda *a: _aba_core(*a, "aba"), aba_derivatives)
+_aba_analytic = _state_derivative(lambda *a: _aba_core(*a, "aba", flag=True), aba_derivatives)
+_SINGULAR = ("{fn}: a joint moves no inertia (articulated inertia <= 0 about its axis): the mass matrix is singular; "
+             "check robot.inertia")
 
 
 def _aba(robot: Robot, q, qd, tau, f_ext, fn):
@@ -525,7 +534,9 @@ def _aba(robot: Robot, q, qd, tau, f_ext, fn):
     return _aba_core(robot, q, qd, tau, f_ext, fn)
 
 
-def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
+def _aba_core(robot: Robot, q, qd, tau, f_ext, fn, flag=False):
+    """ABA's accelerations; with ``flag``, ``(accelerations, singular)`` where ``singular`` (1.0 or
+    0.0) says whether some articulated inertia came out <= 0, checked by the caller."""
     n = robot.nq
     c = consts(robot)
     ls = walk(robot, c, q, qd)
@@ -579,11 +590,11 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn):
         a[i], (qdd[i],) = _barrier6(c.fence, a[i], [qdd[i]])
     out = s.stack(qdd, _dtype())
     Dt = [d for d in D if not isinstance(d, float)]
-    if Dt:  # singular only for some postures or a traced robot: checked at run time
-        out = guard(out, [jnp.any(jnp.stack(Dt) <= 0)], [
-            f"{fn}: a joint moves no inertia (articulated inertia <= 0 about its axis): the mass matrix is singular; "
-            "check robot.inertia"])
-    return out
+    # singular only for some postures or a traced robot: checked at run time
+    singular = jnp.any(jnp.stack(Dt) <= 0) if Dt else jnp.asarray(False)
+    if flag:
+        return out, singular.astype(out.dtype)
+    return guard(out, [singular], [_SINGULAR.format(fn=fn)]) if Dt else out
 
 
 def forward_dynamics(robot: Robot, q, qd, tau, f_ext=None, method: str = "aba"):

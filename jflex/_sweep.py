@@ -27,8 +27,9 @@ import numpy as np
 from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from . import _checks
 from ._allocator import tune_allocator
-from ._errors import ConfigError, DataError, ShapeError
+from ._errors import ConfigError, DataError, ParameterError, ShapeError
 from ._fingerprint import fingerprint
 from ._paths import output_folder
 from ._progress import bar
@@ -112,6 +113,13 @@ def batched(fn: Callable, *, program: str | None = None, batch_size: int | None 
 
 
 def _compile_program(fn, program, batch_size, devices):
+    """The batch program, with ``fn``'s run-time checks as output flags raised on the host
+    (:class:`_Checked`); called with traced arguments (inside a caller's ``jit``), the checks stay
+    inside the program as ``eqx.error_if``."""
+    return _Checked(fn, functools.partial(_program, program=program, batch_size=batch_size, devices=devices))
+
+
+def _program(fn, *, program, batch_size, devices, reduce=None):
     cpu = jax.default_backend() == "cpu"
     options = {"xla_disable_hlo_passes": "fusion"} if program == "unfused" and cpu else None
     if program == "blocks":
@@ -124,7 +132,7 @@ def _compile_program(fn, program, batch_size, devices):
         # fusion, RNEA and ABA came out wrong by O(1); tests/test_sweep_cli.py checks it)
         run = jax.vmap(fn)
     if len(devices) <= 1:
-        return jax.jit(run, compiler_options=options)
+        return jax.jit(run if reduce is None else (lambda *a: reduce(run(*a))), compiler_options=options)
     nd = len(devices)
     spec = PartitionSpec("batch")
     sharded = jax.jit(jax.shard_map(run, mesh=Mesh(np.array(devices), ("batch",)), in_specs=spec, out_specs=spec,
@@ -138,9 +146,53 @@ def _compile_program(fn, program, batch_size, devices):
         if pad:
             args = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]), args)
         out = sharded(*args)
-        return jax.tree_util.tree_map(lambda a: a[:N], out) if pad else out
+        out = jax.tree_util.tree_map(lambda a: a[:N], out) if pad else out
+        return out if reduce is None else _reduce_jit(out)
 
     return split
+
+
+def _flag_summary(out_flags):
+    """``(out, any, first)``: per check, whether it failed for some item and the first such item."""
+    out, flags = out_flags
+    return out, jnp.any(flags, axis=0), jnp.argmax(flags, axis=0)
+
+
+_reduce_jit = jax.jit(_flag_summary)
+
+
+class _Checked:
+    """A batch program whose checks (non-finite inputs, a singular mass matrix, ...) come back as
+    flags: no callback into Python inside the compiled kernel (a GPU would stop for one on every
+    call); the host raises the first failed check's message, with the item it failed for."""
+
+    def __init__(self, fn, build):
+        self._fn, self._build = fn, build
+        self._messages: list = []
+        self._flagged = None
+        self._plain = None
+
+    def __call__(self, *args):
+        if self._flagged is not False and not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
+            if self._flagged is None:
+                self._flagged = self._build(_checks.collecting(self._fn, self._messages), reduce=_flag_summary)
+            try:
+                out, failed, first = self._flagged(*args)
+            except jax.errors.UnexpectedTracerError:
+                # a check inside fn's own lax loop cannot leave it as a flag: keep error_if there
+                self._flagged = False
+            else:
+                failed = np.asarray(failed)
+                if failed.any():
+                    k = int(np.argmax(failed))
+                    # the guards check inputs (NaN/inf: the data) or the robot (a singular mass matrix)
+                    kind = DataError if "NaN/inf" in self._messages[k] else ParameterError
+                    raise kind(f"{self._messages[k]} (batch item {int(np.asarray(first)[k])}, the first of "
+                                    f"the items this check failed for)")
+                return out
+        if self._plain is None:
+            self._plain = self._build(self._fn)
+        return self._plain(*args)
 
 
 class _Fastest:
