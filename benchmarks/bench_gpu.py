@@ -14,6 +14,14 @@ method. A solver missing on the device is reported with the error it raised, not
 It also lists, per kernel, the host callbacks left inside the compiled program (custom calls
 to the Python runtime): each one means the device hands control back to the host.
 
+A machine without Pinocchio (a lent GPU) checks against a reference file written on one that has it:
+``python benchmarks/bench_gpu.py --write-reference ref.npz`` (same ``--size``/``--robot``) here, then
+``--reference ref.npz`` there; the file holds the robot's URDF text, the checked states and
+Pinocchio's values for them. Each result row is written to ``--out`` as soon as it is measured
+(``bench_gpu_<dtype>.json``), so a run stopped by its time limit keeps what it measured;
+``--budget-s`` stops starting new measurements after that many seconds (per dtype: its share),
+and names what it skipped.
+
 ``--size tiny`` (a test runs it on CPU): batch 8, the 2-joint ``planar2`` arm, one posture grid
 of 3 postures and 8 frequencies. The first line printed names the device.
 """
@@ -66,8 +74,12 @@ def _sym(M):
     return np.triu(M) + np.triu(M, 1).T
 
 
-def load(name):
-    """(jflex robot, Pinocchio model, URDF text) of the same arm."""
+def load(name, reference=None):
+    """(jflex robot, Pinocchio model or None, URDF text) of the same arm; with a reference file
+    (written by ``--write-reference``), the URDF comes from it and Pinocchio is not needed."""
+    if reference is not None:
+        text = str(reference["urdf"])
+        return jflex.from_urdf_string(text, name=str(reference["robot"])), None, text
     import pinocchio as pin
 
     if name == "planar2":
@@ -114,51 +126,96 @@ def callbacks(jitted, *args):
     return sorted({t for t in re.findall(r'custom_call_target="([^"]+)"', txt) if "callback" in t or "python" in t})
 
 
-def rigid(robot, model, urdf, batches, dtypes, programs, kernels, rows):
+def states(N, nq, seed=0):
+    """The batch of states timed at size N (the first CHECK are those checked)."""
+    rng = np.random.default_rng(seed + N)
+    q = rng.uniform(-1.5, 1.5, (N, nq))
+    v, a, t = rng.normal(size=(3, N, nq))
+    return q, v, a, 20.0 * t
+
+
+def pinocchio_reference(robot_name, batches, kernels):
+    """Pinocchio's values for the first CHECK states of every batch: what ``--reference`` reads."""
     import pinocchio as pin
 
+    robot, model, urdf = load(robot_name)
     data = model.createData()
-    rng = np.random.default_rng(0)
+    ref = {"urdf": np.array(urdf), "robot": np.array(robot_name)}
+    xml = pin.buildModelFromXML(urdf)  # the model MJX is compared with (its own URDF import)
+    xd = xml.createData()
     for N in batches:
-        q = rng.uniform(-1.5, 1.5, (N, robot.nq))
-        v, a = rng.normal(size=(2, N, robot.nq))
-        t = np.array([pin.rnea(model, data, q[i], v[i], a[i]) for i in range(min(N, CHECK))])
-        t = np.concatenate([t, rng.normal(size=(N - len(t), robot.nq)) * np.abs(t).mean()]) if N > len(t) else t
+        q, v, a, t = (x[:CHECK] for x in states(N, robot.nq))
+        for name in kernels:
+            out = [_copy(KERNELS[name][1](pin, model, data, q[i], v[i], a[i], t[i])) for i in range(len(q))]
+            for k in range(len(out[0]) if isinstance(out[0], tuple) else 1):
+                ref[f"{N}/{name}/{k}"] = np.array([np.array(o[k] if isinstance(o, tuple) else o) for o in out])
+        ref[f"{N}/mjx/rnea"] = np.array([pin.rnea(xml, xd, q[i], v[i], a[i]) for i in range(len(q))])
+        ref[f"{N}/mjx/aba"] = np.array([pin.aba(xml, xd, q[i], v[i], t[i]) for i in range(len(q))])
+    return ref
+
+
+def reference_of(ref, N, name):
+    parts = []
+    while f"{N}/{name}/{len(parts)}" in ref:
+        parts.append(np.asarray(ref[f"{N}/{name}/{len(parts)}"]))
+    if not parts:
+        raise SystemExit(f"the reference file has no Pinocchio values for {name} at batch {N}: write it with the "
+                         "same --size, --robot and --kernels")
+    return parts
+
+
+class Budget:
+    """Stops new measurements once ``seconds`` have passed; what was skipped is recorded."""
+
+    def __init__(self, seconds):
+        self.t0, self.seconds = time.perf_counter(), seconds
+
+    def left(self):
+        return self.seconds is None or time.perf_counter() - self.t0 < self.seconds
+
+
+def rigid(robot, ref, urdf, batches, dtypes, programs, kernels, rows, budget, record):
+    for N in batches:
+        q, v, a, t = states(N, robot.nq)
         for dtype in dtypes:
             r = cast(robot, dtype)
             args = [jnp.asarray(x, dtype) for x in (q, v, a, t)]
             tol = 1e-9 if dtype == "float64" else 2e-3
             for name in kernels:
-                jfn, pfn = KERNELS[name]
-                # copies: Pinocchio returns views of its Data's buffers, overwritten by the next call
-                ref = [_copy(pfn(pin, model, data, q[i], v[i], a[i], t[i])) for i in range(min(N, CHECK))]
-                ref = [np.array([np.array(x[k] if isinstance(x, tuple) else x) for x in ref]) for k in
-                       range(len(ref[0]) if isinstance(ref[0], tuple) else 1)]
+                jfn, _ = KERNELS[name]
+                R_all = reference_of(ref, N, name)
                 f = lambda q, v, a, t, jfn=jfn, r=r: jfn(r, q, v, a, t)
-                for program in programs:
-                    jf = jflex.batched(f, program=program)
+                for program in programs(N):
                     row = {"batch": N, "dtype": dtype, "kernel": name, "program": program}
+                    if not budget.left():
+                        record(dict(row, skipped="time budget spent"))
+                        continue
+                    jf = jflex.batched(f, program=program)
                     try:
                         out, first, best = timed(lambda: jf(*args))
                     except Exception as exc:
                         row["error"] = f"{type(exc).__name__}: {str(exc)[:200]}"
-                        rows.append(row)
+                        record(row)
                         print(f"{N:>8} {dtype} {name:<17} {program:<7} FAILED {row['error']}", flush=True)
                         continue
                     outs = out if isinstance(out, tuple) else (out,)
                     diff = max(float(np.abs(np.asarray(o[: len(R)], float) - R).max() / max(np.abs(R).max(), 1e-300))
-                               for o, R in zip(outs, ref))
+                               for o, R in zip(outs, R_all))
+                    flagged = getattr(jf, "_flagged", None)
                     row.update(us_per_state=1e6 * best / N, first_call_s=first, max_rel_diff_vs_pinocchio=diff,
                                ok=bool(diff < tol), out_dtype=str(outs[0].dtype),
-                               host_callbacks=callbacks(jax.jit(jax.vmap(f)), *[x[:1] for x in args]))
-                    rows.append(row)
+                               host_callbacks=callbacks(flagged, *args) if flagged else ["? (not a flagged program)"],
+                               host_callbacks_plain_jit_vmap=callbacks(jax.jit(jax.vmap(f)), *[x[:1] for x in args]))
+                    record(row)
                     print(f"{N:>8} {dtype} {name:<17} {program:<7} {row['us_per_state']:10.4f} us/state  first call "
-                          f"{first:6.2f} s  rel diff {diff:.1e}{'' if row['ok'] else ' WRONG'}  callbacks {row['host_callbacks']}",
+                          f"{first:6.2f} s  rel diff {diff:.1e}{'' if row['ok'] else ' WRONG'}  callbacks "
+                          f"{row['host_callbacks']} (plain jit(vmap): {row['host_callbacks_plain_jit_vmap']})",
                           flush=True)
-            mjx_rows(urdf, q, v, a, t, N, dtype, rows)
+            if budget.left():
+                mjx_rows(urdf, ref, q, v, a, t, N, dtype, record)
 
 
-def mjx_rows(urdf, q, v, a, t, N, dtype, rows):
+def mjx_rows(urdf, ref, q, v, a, t, N, dtype, record):
     """MuJoCo MJX inverse and forward dynamics on the same device, checked like jflex's."""
     try:
         import mujoco
@@ -166,11 +223,15 @@ def mjx_rows(urdf, q, v, a, t, N, dtype, rows):
     except ImportError:
         return
     try:
-        import pinocchio as pin
-
         text = re.sub(r"<(visual|collision)>.*?</\1>", "", urdf, flags=re.S)
         m = mujoco.MjModel.from_xml_string(text)
         m.opt.gravity[:] = (0, 0, -9.81)
+        # RNEA/ABA as Pinocchio and jflex compute them: no joint-limit constraints (random states
+        # lie beyond the Panda's limits), no damping, armature or dry friction from the URDF import
+        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
+        m.dof_damping[:] = 0.0
+        m.dof_armature[:] = 0.0
+        m.dof_frictionloss[:] = 0.0
         mx = mjx.put_model(m)
         nv = m.nv
         pad = lambda x: jnp.asarray(np.concatenate([x, np.zeros((N, nv - x.shape[1]))], axis=1), dtype)
@@ -189,15 +250,13 @@ def mjx_rows(urdf, q, v, a, t, N, dtype, rows):
             args = [pad(x) for x in xs]
             out, first, best = timed(lambda: jf(*args))
             row = {"batch": N, "dtype": dtype, "kernel": name, "program": "mjx", "us_per_state": 1e6 * best / N,
-                   "first_call_s": first}
-            pm = pin.buildModelFromXML(urdf)
-            pd = pm.createData()
-            k = min(N, CHECK)
-            R = np.array([(pin.rnea if name == "rnea" else pin.aba)(pm, pd, xs[0][i], xs[1][i], xs[2][i]) for i in range(k)])
-            row["max_rel_diff_vs_pinocchio"] = float(np.abs(np.asarray(out)[:k, :n] - R).max() / np.abs(R).max())
-            rows.append(row)
+                   "first_call_s": first, "mujoco": mujoco.__version__}
+            R = np.asarray(ref[f"{N}/mjx/{name}"])
+            row["max_rel_diff_vs_pinocchio"] = float(np.abs(np.asarray(out)[: len(R), :n] - R).max() / np.abs(R).max())
+            row["ok"] = bool(row["max_rel_diff_vs_pinocchio"] < (1e-9 if dtype == "float64" else 2e-3))
+            record(row)
             print(f"{N:>8} {dtype} {name:<17} mjx     {row['us_per_state']:10.4f} us/state  first call {first:6.2f} s  "
-                  f"rel diff {row['max_rel_diff_vs_pinocchio']:.1e} (MJX's own model of the URDF: joint damping/armature may differ)",
+                  f"rel diff {row['max_rel_diff_vs_pinocchio']:.1e}",
                   flush=True)
     except Exception as exc:  # a peer that fails on this robot is reported, not fatal
         print(f"  mjx: skipped ({type(exc).__name__}: {str(exc)[:160]})", flush=True)
@@ -209,7 +268,7 @@ def flexible(robot):
                                                              jnp.full(n, 50.0))])
 
 
-def modal_and_frf(robot, n_postures, n_freq, rows):
+def modal_and_frf(robot, n_postures, n_freq, rows, budget, record):
     import scipy.linalg
 
     model = flexible(robot)
@@ -219,16 +278,19 @@ def modal_and_frf(robot, n_postures, n_freq, rows):
     for solver in ("eig", "newton"):
         f = jax.jit(jax.vmap(lambda q, s=solver: jflex.modal_analysis(model, q, hold="actuated", solver=s).frequency))
         row = {"kernel": "modal_analysis", "solver": solver, "batch": n_postures, "dtype": str(jnp.asarray(1.0).dtype)}
+        if not budget.left():
+            record(dict(row, skipped="time budget spent"))
+            continue
         try:
             out, first, best = timed(lambda: f(jnp.asarray(Q)), reps=2)
         except Exception as exc:
             row["error"] = f"{type(exc).__name__}: {str(exc)[:300]}"
             print(f"modal {solver}: FAILED on {jax.default_backend()}: {row['error']}", flush=True)
-            rows.append(row)
+            record(row)
             continue
         freqs[solver] = np.asarray(out)
         row.update(us_per_posture=1e6 * best / n_postures, first_call_s=first)
-        rows.append(row)
+        record(row)
         print(f"modal {solver:<6} {n_postures} postures: {row['us_per_posture']:10.1f} us/posture, first call {first:.2f} s",
               flush=True)
     # reference: SciPy's eig of the same linearisation (first postures, on the host)
@@ -251,26 +313,30 @@ def modal_and_frf(robot, n_postures, n_freq, rows):
                 row["max_rel_diff_vs_scipy_eig"] = diff
                 row["ok"] = bool(diff < (1e-6 if jax.config.jax_enable_x64 else 1e-3))
         print(f"modal {solver}: max relative difference from SciPy eig {diff:.1e}", flush=True)
+    record(None)  # the rows above now carry their check
 
     omega = jnp.linspace(2 * np.pi * 1.0, 2 * np.pi * 200.0, n_freq)
     direct = None
     for solver in ("eig", "newton"):
         row = {"kernel": "frf_sweep", "solver": solver, "batch": n_postures, "frequencies": n_freq,
                "dtype": str(jnp.asarray(1.0).dtype)}
+        if not budget.left():
+            record(dict(row, skipped="time budget spent"))
+            continue
         try:
             out, first, best = timed(lambda s=solver: jflex.frf_sweep(model, Q, omega, hold="actuated", solver=s,
                                                                          progress=False), reps=1)
         except Exception as exc:
             row["error"] = f"{type(exc).__name__}: {str(exc)[:300]}"
             print(f"frf_sweep {solver}: FAILED on {jax.default_backend()}: {row['error']}", flush=True)
-            rows.append(row)
+            record(row)
             continue
         if direct is None:
             direct = np.asarray(jflex.frf_sweep(model, Q[:2], omega, hold="actuated", method="direct", progress=False))
         row["max_rel_diff_vs_direct"] = float(np.abs(np.asarray(out)[:2] - direct).max() / np.abs(direct).max())
         row["ok"] = bool(row["max_rel_diff_vs_direct"] < (1e-6 if jax.config.jax_enable_x64 else 1e-3))
         row.update(us_per_posture=1e6 * best / n_postures, first_call_s=first)
-        rows.append(row)
+        record(row)
         print(f"frf_sweep {solver:<6} {n_postures} postures x {n_freq} frequencies: {row['us_per_posture']:10.1f} us/posture, "
               f"first call {first:.2f} s, rel diff from the direct method {row['max_rel_diff_vs_direct']:.1e}", flush=True)
 
@@ -281,8 +347,21 @@ def main(argv=None):
     ap.add_argument("--robot", choices=["panda", "planar2"], default=None, help="default: panda (full), planar2 (tiny)")
     ap.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
     ap.add_argument("--kernels", nargs="+", default=list(KERNELS), choices=list(KERNELS))
+    ap.add_argument("--batches", nargs="+", type=int, default=None, help="default: 1e3 1e4 1e5 1e6 (full), 8 (tiny)")
+    ap.add_argument("--postures", type=int, default=None, help="modal/FRF postures (default 1000 full, 3 tiny)")
+    ap.add_argument("--frequencies", type=int, default=None, help="FRF frequencies (default 200 full, 8 tiny)")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--reference", default=None, help="Pinocchio values from --write-reference (no Pinocchio needed)")
+    ap.add_argument("--write-reference", default=None, metavar="FILE")
+    ap.add_argument("--budget-s", type=float, default=None, help="start no new measurement after this (all dtypes)")
     args = ap.parse_args(argv)
+    tiny = args.size == "tiny"
+    robot_name = args.robot or ("planar2" if tiny else "panda")
+    batches = args.batches or ([8] if tiny else [1000, 10000, 100000, 1000000])
+    if args.write_reference:
+        np.savez_compressed(args.write_reference, **pinocchio_reference(robot_name, batches, args.kernels))
+        print(f"wrote {args.write_reference}: Pinocchio values for {robot_name}, batches {batches}, {args.kernels}")
+        return []
     x64 = bool(jax.config.jax_enable_x64)
     if len(args.dtypes) > 1 or (args.dtypes[0] == "float32") == x64:
         # one fresh process per dtype: float32 is jflex with JFLEX_X64=0 (with x64 on, float32 inputs
@@ -291,42 +370,61 @@ def main(argv=None):
         import subprocess
         import tempfile
 
-        rows = []
-        for dtype in args.dtypes:
+        rows, part, failed = [], {}, 0
+        t0 = time.perf_counter()
+        for k, dtype in enumerate(args.dtypes):
             with tempfile.TemporaryDirectory() as tmp:
+                out_dir = args.out or tmp
                 argv2 = [a for a in (argv if argv is not None else sys.argv[1:])]
-                cut = [i for i, a in enumerate(argv2) if a in ("--dtypes", "--out")]
-                for i in sorted(cut, reverse=True):  # drop --dtypes/--out and their values
+                cut = [i for i, a in enumerate(argv2) if a in ("--dtypes", "--out", "--budget-s")]
+                for i in sorted(cut, reverse=True):  # drop --dtypes/--out/--budget-s and their values
                     j = i + 1
                     while j < len(argv2) and not argv2[j].startswith("--"):
                         j += 1
                     del argv2[i:j]
+                if args.budget_s is not None:  # this dtype's share of what is left
+                    share = (args.budget_s - (time.perf_counter() - t0)) / (len(args.dtypes) - k)
+                    argv2 += ["--budget-s", str(max(share, 0.0))]
                 env = dict(os.environ, JFLEX_X64="1" if dtype == "float64" else "0")
-                res = subprocess.run([sys.executable, __file__, *argv2, "--dtypes", dtype, "--out", tmp], env=env)
-                if res.returncode != 0:
-                    sys.exit(res.returncode)
-                part = json.loads((pathlib.Path(tmp) / "bench_gpu.json").read_text())
-            rows += part["rows"]
+                res = subprocess.run([sys.executable, __file__, *argv2, "--dtypes", dtype, "--out", out_dir], env=env)
+                failed += res.returncode != 0
+                path = pathlib.Path(out_dir) / f"bench_gpu_{dtype}.json"
+                if path.exists():
+                    part = json.loads(path.read_text())
+                    rows += part["rows"]
         if args.out:
             pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
             (pathlib.Path(args.out) / "bench_gpu.json").write_text(json.dumps(dict(part, rows=rows), indent=1))
+        if failed:
+            sys.exit(f"{failed} of the dtype runs failed (their rows so far are kept in {args.out or 'the output'})")
         return rows
-    tiny = args.size == "tiny"
-    robot_name = args.robot or ("planar2" if tiny else "panda")
     dev = jax.devices()[0]
     print(f"device: {getattr(dev, 'device_kind', dev.platform)} ({jax.default_backend()}), jax {jax.__version__}, "
           f"robot {robot_name}, size {args.size}", flush=True)
-    robot, model, urdf = load(robot_name)
+    ref = dict(np.load(args.reference)) if args.reference else pinocchio_reference(robot_name, batches, args.kernels)
+    robot, _, urdf = load(robot_name, ref)
     rows = []
-    batches = [8] if tiny else [1000, 10000, 100000, 1000000]
-    rigid(robot, model, urdf, batches, args.dtypes, ["vmap"] if tiny else ["vmap", "blocks"], args.kernels, rows)
-    modal_and_frf(robot, 3 if tiny else 1000, 8 if tiny else 200, rows)
+    head = {"device": str(getattr(dev, "device_kind", dev.platform)), "backend": jax.default_backend(),
+            "jax": jax.__version__, "robot": robot_name, "size": args.size}
+
+    def record(row):
+        if row is not None:
+            rows.append(row)
+        if args.out:  # after every row: a run stopped by its time limit keeps what it measured
+            pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
+            (pathlib.Path(args.out) / f"bench_gpu_{args.dtypes[0]}.json").write_text(json.dumps(dict(head, rows=rows), indent=1))
+            (pathlib.Path(args.out) / "bench_gpu.json").write_text(json.dumps(dict(head, rows=rows), indent=1))
+
+    budget = Budget(args.budget_s)
+    from jflex._sweep import default_batch_size
+
+    block = default_batch_size()
+    # lax.map blocks differ from one fused vmap only when the batch holds several blocks
+    programs = (lambda N: ["vmap"]) if tiny else (lambda N: ["vmap", "blocks"] if N >= 2 * block else ["vmap"])
+    modal_and_frf(robot, args.postures or (3 if tiny else 1000), args.frequencies or (8 if tiny else 200), rows, budget,
+                  record)
+    rigid(robot, ref, urdf, batches, args.dtypes, programs, args.kernels, rows, budget, record)
     bad = [r for r in rows if r.get("ok") is False]
-    if args.out:
-        pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
-        (pathlib.Path(args.out) / "bench_gpu.json").write_text(json.dumps(
-            {"device": str(getattr(dev, "device_kind", dev.platform)), "backend": jax.default_backend(),
-             "jax": jax.__version__, "robot": robot_name, "size": args.size, "rows": rows}, indent=1))
     if bad:
         sys.exit(f"{len(bad)} results differ from their references (Pinocchio, SciPy eig, direct FRF): "
                  "timings of a wrong program are no timings")
