@@ -350,6 +350,7 @@ def main(argv=None):
     ap.add_argument("--batches", nargs="+", type=int, default=None, help="default: 1e3 1e4 1e5 1e6 (full), 8 (tiny)")
     ap.add_argument("--postures", type=int, default=None, help="modal/FRF postures (default 1000 full, 3 tiny)")
     ap.add_argument("--frequencies", type=int, default=None, help="FRF frequencies (default 200 full, 8 tiny)")
+    ap.add_argument("--no-modal", action="store_true", help="rigid-body kernels (and MJX) only")
     ap.add_argument("--out", default=None)
     ap.add_argument("--reference", default=None, help="Pinocchio values from --write-reference (no Pinocchio needed)")
     ap.add_argument("--write-reference", default=None, metavar="FILE")
@@ -421,8 +422,9 @@ def main(argv=None):
     block = default_batch_size()
     # lax.map blocks differ from one fused vmap only when the batch holds several blocks
     programs = (lambda N: ["vmap"]) if tiny else (lambda N: ["vmap", "blocks"] if N >= 2 * block else ["vmap"])
-    modal_and_frf(robot, args.postures or (3 if tiny else 1000), args.frequencies or (8 if tiny else 200), rows, budget,
-                  record)
+    if not args.no_modal:
+        modal_and_frf(robot, args.postures or (3 if tiny else 1000), args.frequencies or (8 if tiny else 200), rows,
+                      budget, record)
     rigid(robot, ref, urdf, batches, args.dtypes, programs, args.kernels, rows, budget, record)
     bad = [r for r in rows if r.get("ok") is False]
     if bad:

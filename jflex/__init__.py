@@ -15,8 +15,22 @@ import typing as _typing
 # XLA:CPU's new fusion emitters recompute shared subexpressions of long elementwise graphs
 # (the rigid-body kernels, MuJoCo MJX) and run them up to 1000x slower (see DESIGN.md and
 # benchmarks/bench_dynamics.py). The legacy emitters do not. The flag only takes effect if set
-# before JAX starts its CPU backend; JFLEX_XLA_FLAGS=0 leaves XLA_FLAGS untouched.
-if _os.environ.get("JFLEX_XLA_FLAGS", "1") != "0" and "xla_cpu_use_fusion_emitters" not in _os.environ.get("XLA_FLAGS", ""):
+# before JAX starts its CPU backend; JFLEX_XLA_FLAGS=0 leaves XLA_FLAGS untouched. jaxlib 0.11
+# no longer has the flag, and XLA aborts the process on a flag it does not know (seen with
+# jaxlib 0.11.2 on a GPU machine), so it is set only for the jaxlib releases that have it.
+
+
+def _jaxlib_has_fusion_emitter_flag() -> bool:
+    try:
+        major, minor = (int(x) for x in _md.version("jaxlib").split(".")[:2])
+    except (_md.PackageNotFoundError, ValueError):
+        return False
+    return (major, minor) < (0, 11)
+
+
+_SET_XLA_FLAG = (_os.environ.get("JFLEX_XLA_FLAGS", "1") != "0" and _jaxlib_has_fusion_emitter_flag()
+                 and "xla_cpu_use_fusion_emitters" not in _os.environ.get("XLA_FLAGS", ""))
+if _SET_XLA_FLAG:
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
 
 import jax as _jax
@@ -25,7 +39,7 @@ try:  # warn when JAX's CPU backend started before the flag could apply (private
     from jax._src import xla_bridge as _xb
 except Exception:
     _xb = None
-if _xb is not None and getattr(_xb, "_backends", None) and _os.environ.get("JFLEX_XLA_FLAGS", "1") != "0":
+if _xb is not None and getattr(_xb, "_backends", None) and _SET_XLA_FLAG:
     import warnings as _warnings
 
     _warnings.warn(
