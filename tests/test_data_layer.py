@@ -90,6 +90,10 @@ def test_jitter_drops_and_repeats_resample_to_the_uniform_twin(tmp_path):
                     allow_outside=True).datasets[0]
     s = jit.conditioning["sampling"]
     assert s["resampled"] and s["dropped_samples"] == 12 and s["repeated_stamps"] == 5 and s["jitter_pct"] > 20
+    # the jitter is that of the steps that dropped nothing (stamps +-20 %: steps within +-40 %, the
+    # median step a little off h); a step over one dropped sample is about two steps long
+    assert s["jitter_pct"] < 42
+    assert 1.55 < s["longest_step"] < 2.45
     assert not twin.conditioning["sampling"]["resampled"]
     # on its grid the resampled log is the motion within linear interpolation's error h^2/8 |q''|
     t = jit.arrays["t"]
