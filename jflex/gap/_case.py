@@ -434,6 +434,20 @@ def _load_robot(spec: str, base, file, allow_outside):
         raise ConfigError(f"{file}: field 'robot': {exc}") from None
 
 
+def _refuse_mimic(robot, file):
+    """A robot with coupled (<mimic>) joints is refused by name: every effect of the diagnosis (the
+    nominal friction, each candidate) indexes joints as coordinates, which a follower has none of
+    (jflex.Model refuses effects on it), and its data would need a column per coordinate."""
+    mimic = getattr(robot, "mimic", ())
+    pairs = [(robot.joint_names[i], robot.joint_names[k]) for i, k in enumerate(mimic) if k >= 0]
+    if pairs:
+        raise _err(file, "robot", "joints coupled by <mimic> are not supported by the diagnosis ("
+                   + ", ".join(f"{f} follows {lead}" for f, lead in pairs) + "); expected a robot without them: "
+                   "lock the leaders, which locks their followers (robot: {file: ..., lock: {"
+                   + ", ".join(f"{lead}: 0.0" for lead in dict.fromkeys(lead for _, lead in pairs))
+                   + "}}), or keep only the other joints (robot: {file: ..., joints: [...]})")
+
+
 def _load_reduced_robot(rs, base, file, allow_outside):
     """The robot of a ``robot: {file, joints, lock}`` entry: a URDF (or a robot YAML / config name
     resolving to one) reduced to ``joints``, the others locked (:func:`jflex.load_urdf`)."""
@@ -541,6 +555,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         robot = _load_reduced_robot(spec.robot, base, file, allow_outside)
     else:
         robot = _load_robot(spec.robot, base, file, allow_outside)
+    _refuse_mimic(robot, file)
     if spec.robot_inertia is not None:
         # link parameters realised from identified base parameters need not be physically
         # consistent per link (only their combinations are identified): taken as they are
