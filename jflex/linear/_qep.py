@@ -123,6 +123,13 @@ def qep_newton(M, C, K, iters: int = _ITERS):
     **Returns:** ``(lam (n,), psi (n, n))``: eigenvalues in the order of the undamped modes
     (ascending undamped frequency) and mode shapes in physical coordinates (columns).
     """
+    # full-precision products: on a GPU, JAX's default float32 matmul rounds through TF32 (about
+    # 1e-3), which no residual check of an eigenpair can pass
+    with jax.default_matmul_precision("highest"):
+        return _qep_newton(M, C, K, iters)
+
+
+def _qep_newton(M, C, K, iters):
     M, C, K = (jnp.asarray(A, dtype=float) for A in (M, C, K))
     n = M.shape[0]
     L = jnp.linalg.cholesky(M)
@@ -144,7 +151,10 @@ def qep_newton(M, C, K, iters: int = _ITERS):
     scale = jnp.abs(lam) ** 2 + jnp.abs(lam) * jnp.max(jnp.abs(Ct)) + jnp.max(jnp.abs(Kt))
     R = jnp.einsum("rij,jr->ir", lam[:, None, None] ** 2 * eye + lam[:, None, None] * Ct + Kt, Y)
     res = jnp.linalg.norm(R, axis=0) / jnp.linalg.norm(Y, axis=0)
-    bad = jnp.any(~(res <= _TOL * scale)) | jnp.any(~(lam.imag > 0))
+    # the relative residual reachable in the working precision: float32 (JFLEX_X64=0) rounds at
+    # about 1e-7, far above _TOL, and Newton would be reported as not converged at every posture
+    tol = max(_TOL, 64 * float(jnp.finfo(Kt.dtype).eps))
+    bad = jnp.any(~(res <= tol * scale)) | jnp.any(~(lam.imag > 0))
     if n > 1:
         gaps = jnp.abs(lam[:, None] - lam[None, :]) + jnp.eye(n) * jnp.inf
         bad = bad | jnp.any(gaps <= 1e-6 * jnp.abs(lam)[:, None])
