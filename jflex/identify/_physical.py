@@ -84,13 +84,16 @@ class PhysicalResult(NamedTuple):
 
     When the best consistent body lies on the boundary of consistency (a zero principal moment),
     its log-Cholesky coordinates run off to infinity, so the solver's step criterion is never met
-    and ``result`` reports the step limit although the cost has long stopped changing."""
+    although the cost has long stopped changing: the fit then stops once ``stall_steps`` steps
+    lower the chi-square by less than ``stall_chi2``, and ``stop`` says which rule ended it
+    (``"converged"``, ``"cost stalled"``, ``"step limit"``)."""
 
     theta: np.ndarray
     inertia: np.ndarray
     cost: float
     steps: int
     result: object
+    stop: str = ""
 
 
 def _row_weights(weights, m: int):
@@ -116,6 +119,8 @@ def physical_fit(
     compress: bool | None = None,
     solver=None,
     max_steps: int = 200,
+    stall_chi2: float = 0.1,
+    stall_steps: int = 20,
 ) -> PhysicalResult:
     """Physically consistent least squares: ``min |W (A theta - y)|^2 + w^2 |theta - prior|^2``
     with the first ``10 n_links`` entries of theta parametrised per body by log-Cholesky.
@@ -138,6 +143,10 @@ def physical_fit(
       p rows instead of m per step. Default: when m > 2 p.
     - ``solver``: an optimistix least-squares solver (default Levenberg-Marquardt).
     - ``max_steps``: the solver's step limit.
+    - ``stall_chi2``, ``stall_steps``: stop when ``stall_steps`` steps lower the chi-square
+      ``|r|^2 / s^2`` by less than ``stall_chi2``, with ``s^2 = |r|^2 / m`` the mean squared
+      residual of the m rows: a change no statistical test could see (a body at the boundary of
+      consistency never meets the solver's step criterion).
 
     **Returns:** :class:`PhysicalResult`.
     """
@@ -166,10 +175,10 @@ def physical_fit(
     ynorm = max(float(np.linalg.norm(y)), 1e-300)
     offset = 0.0  # |y|^2 - |Q^T y|^2: the part of the cost no theta can change
     if compress if compress is not None else m > 2 * p:
-        Q, R = np.linalg.qr(A, mode="reduced")
-        z = Q.T @ y
-        offset = max(float(y @ y - z @ z), 0.0)
-        A, y = R, z
+        # R of [A y] holds R, Q^T y and the residual no theta reaches: Q itself (m x p) is never formed
+        Rxy = np.linalg.qr(np.column_stack([A, y]), mode="r")
+        A, y = Rxy[:p, :p], Rxy[:p, p]
+        offset = float(Rxy[p, p] ** 2) if Rxy.shape[0] > p else 0.0
     A, y = jnp.asarray(A), jnp.asarray(y)
 
     def theta_of(u):
@@ -181,8 +190,22 @@ def physical_fit(
         return jnp.concatenate([(A @ th - y) / ynorm, w * (th - prior_j) / ynorm])
 
     solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-12, atol=1e-14)
-    sol = optx.least_squares(resid, solver, u0, max_steps=max_steps, throw=False)
-    th = np.asarray(theta_of(sol.value))
-    r = np.asarray(resid(sol.value, None)) * ynorm
-    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), int(sol.stats["num_steps"]),
-                          sol.result)
+    cost_of = jax.jit(lambda u: 0.5 * jnp.sum((resid(u, None) * ynorm) ** 2))
+    # placed as the solver's own results are, so its second round reuses the first's program
+    u0 = jax.device_put(u0, jax.devices()[0])
+    u, steps, prev, stop = u0, 0, float(cost_of(u0)) + 0.5 * offset, "step limit"
+    while steps < max_steps:
+        # in rounds of stall_steps: the same compiled solver each round (same function and shapes)
+        sol = optx.least_squares(resid, solver, u, max_steps=min(stall_steps, max_steps - steps), throw=False)
+        u, steps = sol.value, steps + int(sol.stats["num_steps"])
+        cost = float(cost_of(u)) + 0.5 * offset
+        if sol.result == optx.RESULTS.successful:
+            stop = "converged"
+            break
+        if (prev - cost) * m / cost <= stall_chi2:  # the chi-square change 2 (prev - cost) / s^2, s^2 = 2 cost / m
+            stop = "cost stalled"
+            break
+        prev = cost
+    th = np.asarray(theta_of(u))
+    r = np.asarray(resid(u, None)) * ynorm
+    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), steps, sol.result, stop)
