@@ -97,6 +97,13 @@ def batched(fn: Callable, *, program: str | None = None, batch_size: int | None 
     ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` (before JAX is imported) and
     pass ``jax.devices()``.
 
+    The library's run-time checks inside ``fn`` (NaN/inf arguments, a singular mass matrix) are
+    compiled as output flags, not as callbacks into Python: after each call the host raises the
+    first failed check's :class:`jflex.DataError` / :class:`jflex.ParameterError`, naming the batch
+    item (a GPU would otherwise hand control back to the host from inside the kernel). Called
+    inside a caller's ``jit``, or where a check sits inside ``fn``'s own ``lax`` loop or
+    derivative, the checks stay in the program as ``eqx.error_if``.
+
     Like :func:`sweep`, it calls :func:`jflex.tune_allocator` (``JFLEX_TUNE_ALLOCATOR=0`` opts out).
     """
     _tune_allocator_once()
