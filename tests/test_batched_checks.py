@@ -82,3 +82,17 @@ def test_inside_a_callers_jit_the_checks_stay(arm):
     bad[2, 0] = np.inf
     with pytest.raises(Exception, match="NaN/inf"):
         jax.block_until_ready(total(bad))
+
+
+def test_a_check_inside_the_functions_own_loop_keeps_error_if(arm):
+    # a guard traced inside fn's lax loop cannot leave the loop as a flag: the program with the
+    # checks inside is used instead, with the same numbers
+    robot, _ = arm
+    g = lambda q: jax.lax.fori_loop(0, 2, lambda i, x: x + jflex.gravity(robot, q), q * 0)
+    b = jflex.batched(g)
+    q = np.random.default_rng(0).uniform(-1, 1, (6, robot.nq))
+    np.testing.assert_allclose(np.asarray(b(q)), np.asarray(jax.vmap(g)(q)), rtol=1e-12, atol=1e-12)
+    bad = q.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(Exception, match="NaN/inf"):
+        jax.block_until_ready(b(bad))
