@@ -189,13 +189,7 @@ class _Checked:
                 # a check inside fn's own lax loop cannot leave it as a flag: keep error_if there
                 self._flagged = False
             else:
-                failed = np.asarray(failed)
-                if failed.any():
-                    k = int(np.argmax(failed))
-                    # the guards check inputs (NaN/inf: the data) or the robot (a singular mass matrix)
-                    kind = DataError if "NaN/inf" in self._messages[k] else ParameterError
-                    raise kind(f"{self._messages[k]} (batch item {int(np.asarray(first)[k])}, the first of "
-                                    f"the items this check failed for)")
+                _raise_failed(failed, first, self._messages)
                 return out
         if self._plain is None:
             self._plain = self._build(self._fn)
@@ -308,6 +302,27 @@ def _vmapped(template, values, *items):
     return jax.vmap(_rebuild(template, values))(*items)
 
 
+@eqx.filter_jit
+def _vmapped_flagged(template, values, *items):
+    """:func:`_vmapped` with fn's checks as flags (see :class:`_Checked`); the messages are a static
+    output, kept by ``filter_jit`` with the compiled program."""
+    messages = []
+    out, failed, first = _flag_summary(jax.vmap(_checks.collecting(_rebuild(template, values), messages))(*items))
+    return out, failed, first, tuple(messages)
+
+
+def _raise_failed(failed, first, messages, start=0):
+    """Raise the first failed check's message, naming the item it failed for (``start``: the
+    index of the batch's first item in the whole sweep; see :class:`_Checked`)."""
+    failed = np.asarray(failed)
+    if failed.any():
+        k = int(np.argmax(failed))
+        # the guards check inputs (NaN/inf: the data) or the robot (a singular mass matrix)
+        kind = DataError if "NaN/inf" in messages[k] else ParameterError
+        raise kind(f"{messages[k]} (batch item {start + int(np.asarray(first)[k])}, the first of the items this "
+                   "check failed for)")
+
+
 def _hashable(tree) -> bool:
     """Whether eqx.filter_jit can key on the non-array parts of ``tree`` (it hashes them)."""
     try:
@@ -339,19 +354,28 @@ def _sweep_program(fn, one_item):
     jax.eval_shape(fn, *one_item)
     template, values = _split(fn)
     if _hashable(template) and _hashable(values):
-        shared = functools.partial(_vmapped, template, values)
+        shared, flagged = functools.partial(_vmapped, template, values), True
 
-        def run(*items):
-            nonlocal shared
+        def run(*items, start=0):
+            nonlocal shared, flagged
             if shared is not None:
                 try:
+                    if flagged:
+                        out, failed, first, messages = _vmapped_flagged(template, values, *items)
+                        _raise_failed(failed, first, messages, start)
+                        return out
                     return shared(*items)
+                except jax.errors.UnexpectedTracerError:
+                    # a check inside fn's own lax loop cannot leave it as a flag: keep error_if there
+                    flagged = False
+                    return run(*items)
                 except _TRACE_ERRORS:
                     shared = None
             return _constant_program(fn)(*items)
 
         return run
-    return _constant_program(fn)
+    program = _constant_program(fn)
+    return lambda *items, start=0: program(*items)
 
 
 def _constant_program(fn):
@@ -403,6 +427,9 @@ def sweep(
     **Returns:** the outputs for all N items as NumPy arrays (same pytree structure as ``fn``'s).
     An empty batch (N = 0) returns empty arrays: leading axis 0, then the shape and dtype ``fn``
     gives one item (``fn`` is traced once, never run; nothing is written to ``out_dir``).
+
+    As in :func:`batched`, the library's run-time checks inside ``fn`` are output flags of the
+    compiled program, raised on the host after each chunk with the index of the first failing item.
 
     The compiled program is kept: a second ``sweep`` of the same function, or of a new closure or
     ``functools.partial`` of the same code over other arrays of the same shapes (another robot's
@@ -468,7 +495,7 @@ def sweep(
                         a = xp.concatenate([a, xp.repeat(a[-1:], pad, axis=0)])
                     return jax.device_put(a, sharding)
 
-                out = vfn(*jax.tree_util.tree_map(take, args))
+                out = vfn(*jax.tree_util.tree_map(take, args), start=start)
                 if multi:  # the chunk's outputs live on every process's devices: gather them
                     out = multihost_utils.process_allgather(out, tiled=True)
                 host = jax.tree_util.tree_map(lambda a: np.asarray(a)[: stop - start], out)

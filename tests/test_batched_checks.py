@@ -96,3 +96,15 @@ def test_a_check_inside_the_functions_own_loop_keeps_error_if(arm):
     bad[3, 1] = np.nan
     with pytest.raises(Exception, match="NaN/inf"):
         jax.block_until_ready(b(bad))
+
+
+def test_sweep_raises_a_failed_check_naming_the_item_of_the_whole_sweep(arm):
+    robot, _ = arm
+    q = np.random.default_rng(0).uniform(-1, 1, (50, robot.nq))
+    f = lambda q: jflex.aba(robot, q, q, q)
+    np.testing.assert_allclose(jflex.sweep(f, q, chunk_size=16, progress=False), np.asarray(jax.vmap(f)(q)),
+                               rtol=1e-12, atol=1e-12)
+    bad = q.copy()
+    bad[37, 2] = np.nan  # in the third chunk of 16
+    with pytest.raises(jflex.DataError, match=r"aba: q contains NaN/inf \(batch item 37"):
+        jflex.sweep(f, bad, chunk_size=16, progress=False)
