@@ -68,14 +68,18 @@ def _unfold(robot: Robot) -> Robot:
     return robot
 
 
-def compiled(fn):
+def compiled(fn=None, *, compiler_options=None):
     """``fn`` through one compiled program per robot, model structure and static options.
 
     Array leaves of the arguments (except the robots' kinematic constants) are arguments of the
     program; every other leaf (strings, tuples, Python numbers) and the tree structure key its
     cache, so they must be hashable: arguments that are not fall back to a plain call, as do
-    traced arguments (a call inside a caller's transformation is traced inline)."""
-    program = eqx.filter_jit(lambda args, kwargs: fn(*_map_robots(_unfold, args), **_map_robots(_unfold, kwargs)))
+    traced arguments (a call inside a caller's transformation is traced inline).
+    ``compiler_options`` go to XLA (``jax.jit``'s)."""
+    if fn is None:
+        return functools.partial(compiled, compiler_options=compiler_options)
+    program = eqx.filter_jit(lambda args, kwargs: fn(*_map_robots(_unfold, args), **_map_robots(_unfold, kwargs)),
+                             **({"compiler_options": compiler_options} if compiler_options else {}))
 
     @functools.wraps(fn)
     def call(*args, **kwargs):

@@ -84,3 +84,18 @@ def test_frf_sweep_bad_inputs():
     hyst = jflex.Model(robot, [FlexibleJoints([2e5, 3e5, 1e5]), StructuralDamping(np.diag([2e5]), Hysteretic(eta=0.02), (3,))])
     with pytest.raises(jflex.ParameterError, match="method='direct'"):
         jflex.frf_sweep(hyst, np.zeros((2, 3)), w, hold="actuated", progress=False)
+
+
+def test_quickly_compiled_sweep_equals_the_optimised_one(monkeypatch):
+    # small sweeps run programs compiled without LLVM's optimisation passes (a first call in
+    # half the time); they must give the optimised programs' numbers
+    from jflex.linear import _frf_sweep
+
+    model = _arm()
+    Q = np.random.default_rng(5).uniform(-1.5, 1.5, (9, 3))
+    w = 2 * np.pi * np.linspace(1.0, 150.0, 16)
+    kw = dict(hold="actuated", frame="tool", progress=False)
+    quick = jflex.frf_sweep(model, Q, w, **kw)
+    monkeypatch.setattr(_frf_sweep, "QUICK_COMPILE_POSTURES", 0)
+    full = jflex.frf_sweep(model, Q, w, **kw)
+    np.testing.assert_allclose(quick, full, rtol=1e-10, atol=1e-12 * np.abs(full).max())

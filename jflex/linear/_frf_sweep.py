@@ -39,17 +39,31 @@ def _padded(a, n):
 # module-level programs (the model's numbers traced, its structure, the robot's kinematics and
 # the options static, see jflex._compiled): repeated sweeps over the same robot and model
 # structure reuse one compilation
-@compiled
-def _poles(model, Q, kw):
+def _poles_of(model, Q, kw):
     return jax.vmap(lambda q: pole_residue(model, q, **dict(kw)))(Q)
+
+
+_poles = compiled(_poles_of)
+# The same programs compiled without LLVM's optimisation passes (both stages): on the flexible-
+# joint Panda (14 coordinates, 200 frequencies) a first call of 64 postures took 7.2 s against
+# 14.3-15.2 s, and 1024 postures then ran in 1.47 against 0.87 s (load 2-3 on 2 cores): about
+# 0.6 ms a posture more for some 8 s less compilation. Sweeps up to QUICK_COMPILE_POSTURES use
+# them, where the slower run costs at most ~1.2 s even once a compilation cache has the
+# optimised program.
+_poles_quick = compiled(_poles_of, compiler_options={"xla_backend_optimization_level": 0})
+QUICK_COMPILE_POSTURES = 2048
 
 
 # jax.jit rather than eqx.filter_jit, and the block sliced inside: one cheap dispatch per block
 # (~20 us against ~45 us plus two eager slices, per 64 postures)
-@functools.partial(jax.jit, static_argnames=("kind", "block"))
-def _synthesize(items, start, omega, kind, block):
+def _synthesize_of(items, start, omega, kind, block):
     sub = jax.tree_util.tree_map(lambda a: jax.lax.dynamic_slice_in_dim(a, start, block), items)
     return jax.vmap(lambda pr: synthesize_frf(pr, omega, kind=kind))(sub)
+
+
+_synthesize = functools.partial(jax.jit, static_argnames=("kind", "block"))(_synthesize_of)
+_synthesize_quick = functools.partial(jax.jit, static_argnames=("kind", "block"),
+                                      compiler_options={"xla_backend_optimization_level": 0})(_synthesize_of)
 
 
 @eqx.filter_jit
@@ -111,8 +125,10 @@ def frf_sweep(
     hold = hold if isinstance(hold, str) else tuple(hold)
     kw = (("hold", hold), ("frame", frame), ("reference", reference), ("components", components), ("solver", solver))
     if method == "modal":
-        stage1 = lambda Qc: _poles(model, Qc, kw)
-        stage2 = lambda items, start: _synthesize(items, start, omega, kind, block)
+        poles = _poles_quick if N <= QUICK_COMPILE_POSTURES else _poles
+        stage1 = lambda Qc: poles(model, Qc, kw)
+        synthesize = _synthesize_quick if N <= QUICK_COMPILE_POSTURES else _synthesize
+        stage2 = lambda items, start: synthesize(items, start, omega, kind, block)
     else:
         stage1 = lambda Qc: Qc
         stage2 = lambda Qc, start: _direct(model, jax.lax.dynamic_slice_in_dim(Qc, start, block), omega, kind, kw)
