@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import has_inertia
-from ._compiled import compiled
+from ._compiled import QUICK_COMPILE, compiled
 from ._dynamics import _crba, _rnea, forward_kinematics
 from ._errors import ParameterError, ShapeError
 from ._robot import PRISMATIC, Robot
@@ -336,7 +336,7 @@ def _linearize_impl(model: Model, x0, keep: tuple[int, ...], t) -> Linearization
     return Linearization(M, C, K, B[idx], tuple(lay.coord_names[i] for i in keep), keep)
 
 
-_linearize = compiled(_linearize_impl)
+_linearize = compiled(_linearize_impl, compiler_options=QUICK_COMPILE)
 
 
 def dynamic_stiffness(model: Model, x0, omega, *, hold=()):

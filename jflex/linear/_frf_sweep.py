@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import compiled
+from .._compiled import QUICK_COMPILE, compiled
 from .._errors import ShapeError
 from .._model import Model
 from .._progress import bar
@@ -50,7 +50,7 @@ _poles = compiled(_poles_of)
 # 0.6 ms a posture more for some 8 s less compilation. Sweeps up to QUICK_COMPILE_POSTURES use
 # them, where the slower run costs at most ~1.2 s even once a compilation cache has the
 # optimised program.
-_poles_quick = compiled(_poles_of, compiler_options={"xla_backend_optimization_level": 0})
+_poles_quick = compiled(_poles_of, compiler_options=QUICK_COMPILE)
 QUICK_COMPILE_POSTURES = 2048
 
 
@@ -63,7 +63,7 @@ def _synthesize_of(items, start, omega, kind, block):
 
 _synthesize = functools.partial(jax.jit, static_argnames=("kind", "block"))(_synthesize_of)
 _synthesize_quick = functools.partial(jax.jit, static_argnames=("kind", "block"),
-                                      compiler_options={"xla_backend_optimization_level": 0})(_synthesize_of)
+                                      compiler_options=QUICK_COMPILE)(_synthesize_of)
 
 
 @eqx.filter_jit

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from .._errors import ShapeError
-from .._compiled import compiled
+from .._compiled import QUICK_COMPILE, compiled
 from .._model import Model, resolve_hold
 from ._common import check_inertia, linearization, mass_ok, require_mass, tool_jacobian
 from ._qep import qep_newton
@@ -193,4 +193,4 @@ def _modal_impl(model, posture, held, frame, reference, components, solver):
 # one compiled program per model structure and options: the model's numbers and the posture are
 # its arguments, so un-jitted calls at other postures (or on another model of the same
 # structure) do not trace again
-_modal_program = compiled(_modal_impl)
+_modal_program = compiled(_modal_impl, compiler_options=QUICK_COMPILE)
