@@ -354,10 +354,9 @@ def _response_motion(t, tau, y, ch, path, robot):
     spread of their second difference) is propagated instead: ``tau_repeats`` holds the applied
     torques plus the nominal model's torque change under ``RESPONSE_NOISE_DRAWS`` redraws of it.
     """
-    import jax.numpy as jnp
     from scipy.signal import savgol_filter
 
-    from ._torque import _id_batch
+    from ._torque import _id_batch, on_rows
 
     if t.size < 20:
         raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
@@ -384,11 +383,11 @@ def _response_motion(t, tau, y, ch, path, robot):
     q, qd, qdd = derive(q_raw)
     rng = np.random.default_rng(0)
     # the torque sets' compiled batch inverse dynamics: one compile per robot structure
-    F0 = np.asarray(_id_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
+    F0 = on_rows(_id_batch, (robot,), (q, qd, qdd))
     reps = []
     for _ in range(RESPONSE_NOISE_DRAWS):
         qk, qdk, qddk = derive(q + sig * rng.standard_normal(q.shape))
-        reps.append(tau + np.asarray(_id_batch(robot, jnp.asarray(qk), jnp.asarray(qdk), jnp.asarray(qddk))) - F0)
+        reps.append(tau + on_rows(_id_batch, (robot,), (qk, qdk, qddk)) - F0)
     return {"q": q, "qd": qd, "qdd": qdd, "q_extra": np.zeros((t.size, 0)), "tau_repeats": np.stack(reps),
             "angle_noise_rad": sig, "cutoff_hz": fc, "window_samples": win}
 

@@ -302,7 +302,9 @@ def family_columns(robot, name, hyper, q, qd, qdd) -> np.ndarray:
     fam = family_of(robot, name)
     model = fam.with_hyper(hyper)
     p = fam.spec.physical(fam.spec.pack(model))
-    return np.asarray(_columns(model, fam.spec, p, q, qd, qdd))
+    from ._torque import on_rows
+
+    return on_rows(_columns, (model, fam.spec, p), (q, qd, qdd))
 
 
 class FamilyCoefficients:

@@ -66,6 +66,24 @@ class TorqueSet:
         return zero_phase_lowpass(X, float(np.mean(np.diff(self.t))), self.cutoff)
 
 
+ROW_BUCKET = 512  # samples: a batch's rows are padded to a multiple of this before a compiled call
+
+
+def on_rows(fn, static: tuple, arrays) -> object:
+    """``fn(*static, *arrays)`` of a compiled, row-wise (vmapped) function, with ``arrays`` padded
+    along their first axis (the last row repeated) to a multiple of ROW_BUCKET and the outputs cut
+    back to the rows given, as NumPy arrays. A compiled program is specialised to its shapes: real
+    logs' records differ by a sample or two after resampling (1999, 2000), and each length compiled
+    every batch anew (a jittered 7-joint log: 204 s against its uniform twin's 49 s)."""
+    arrays = [np.asarray(a) for a in arrays]
+    N = arrays[0].shape[0]
+    M = max(-(-N // ROW_BUCKET) * ROW_BUCKET, ROW_BUCKET)
+    if M > N:
+        arrays = [np.concatenate([a, np.repeat(a[-1:], M - N, axis=0)]) for a in arrays]
+    out = fn(*static, *(jnp.asarray(a) for a in arrays))
+    return jax.tree.map(lambda o: np.asarray(o)[:N], out)
+
+
 @jax.jit
 def _id_batch(robot, q, qd, qdd):
     return jax.vmap(lambda a, b, c: rnea(robot, a, b, c))(q, qd, qdd)
@@ -130,7 +148,7 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     velocity_only = (getattr(ds, "conditioning", None) or {}).get("derivatives") == "velocity"
     if derivatives_given(ds) and not velocity_only:
         q, qd, qdd = a["q"], a["qd"], a["qdd"]
-        F, Y = (np.asarray(v) for v in _rigid_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
+        F, Y = on_rows(_rigid_batch, (robot,), (q, qd, qdd))
         return TorqueSet(ds.name, t, q, qd, qdd, tau_raw, F, np.maximum(tau_raw.std(axis=0), 1e-9), Y,
                          a["q_extra"], ds.extra_joints, robot)
     rows = {"q": np.asarray(a["q"], float), "tau": tau_raw, "q_extra": np.asarray(a["q_extra"], float)}
@@ -176,12 +194,12 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     hi = f > NOISE_BAND[0] * f_m
     var_tau = (P[hi] * g[hi, None]).sum(axis=0) * df + level * (g[~hi].sum() * df)
     rng = np.random.default_rng(0)
-    F, Y = (np.asarray(v) for v in _rigid_batch(robot, jnp.asarray(q), jnp.asarray(qd), jnp.asarray(qdd)))
+    F, Y = on_rows(_rigid_batch, (robot,), (q, qd, qdd))
     dev = []
     for _ in range(NOISE_DRAWS):
         qk, qdk, qddk = derive(q_raw + sig_q * rng.standard_normal(q_raw.shape),
                                None if sig_qd is None else rows["qd"] + sig_qd * rng.standard_normal(q_raw.shape))
-        dev.append(np.asarray(_id_batch(robot, jnp.asarray(qk), jnp.asarray(qdk), jnp.asarray(qddk))) - F)
+        dev.append(on_rows(_id_batch, (robot,), (qk, qdk, qddk)) - F)
     var_q = np.mean([d.var(axis=0) for d in dev], axis=0)
     k = int(decimate)
     # the filter's start and end transients (zero-phase: both ends) are cut off the record

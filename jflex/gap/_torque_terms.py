@@ -25,7 +25,7 @@ from .._dynamics import _rnea
 from ..identify._signal import motion_band, zero_phase_lowpass
 from ..effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
 from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
-from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, predict, term_columns
+from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, on_rows, predict, term_columns
 
 # [s] grid of sensor delays, of either sign: the torque lagging the angles (d > 0), or the encoders
 # lagging the torque (d < 0: a position read by a slower bus, or stamped at the end of a cycle)
@@ -187,7 +187,7 @@ def link_lag_column(s: TorqueSet, j: int, lag) -> np.ndarray:
     d = [np.zeros_like(s.q) for _ in range(3)]
     for k, v in enumerate((lag, lagd, np.gradient(lagd, s.t))):
         d[k][:, j] = v
-    return -np.asarray(_jvp_batch(s.robot, *[jnp.asarray(a) for a in (s.q, s.qd, s.qdd, *d)]))
+    return -on_rows(_jvp_batch, (s.robot,), (s.q, s.qd, s.qdd, *d))
 
 
 def smooth_torque(s: TorqueSet) -> np.ndarray:
@@ -276,12 +276,12 @@ def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
         ql, qdl = s.q.copy(), s.qd.copy()
         ql[:, j] = first_order_zero_phase(play(s.q[:, j], b), s.t, tau_e)
         qdl[:, j] = np.gradient(ql[:, j], s.t)
-        Fa = np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(s.qdd)))
+        Fa = on_rows(_id_batch, (s.robot,), (ql, qdl, s.qdd))
         cols = [Fa - s.F0]
         for w in BACKLASH_PULSES:
             qdd = s.qdd.copy()
             qdd[:, j] = np.gradient(first_order_zero_phase(qdl[:, j], s.t, w), s.t)
-            cols.append(np.asarray(_id_batch(s.robot, jnp.asarray(ql), jnp.asarray(qdl), jnp.asarray(qdd))) - Fa)
+            cols.append(on_rows(_id_batch, (s.robot,), (ql, qdl, qdd)) - Fa)
         s.cache[key] = np.stack(cols, axis=2)
     return s.cache[key]
 
@@ -546,7 +546,7 @@ class RegisteredTerm(TorqueTerm):
         key = ("registered", self.effect, None if whole else self.group(n), self.hyper)
         if key not in s.cache:
             eff = self.build(robot, tuple(range(n)) if whole else None)
-            Y = np.asarray(_effect_columns(eff, robot, *(jnp.asarray(a) for a in (s.q, s.qd, s.qdd))))
+            Y = on_rows(_effect_columns, (eff, robot), (s.q, s.qd, s.qdd))
             s.cache[key] = (Y, np.asarray(eff.parameter_joints(robot)))
         Y, owner = s.cache[key]
         return Y[:, :, owner == self.joint] if whole else Y
