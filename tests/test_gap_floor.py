@@ -74,6 +74,23 @@ def test_no_period_in_a_single_period_or_a_non_repeating_motion():
     assert find_period(q) == int(round(1.0 * FS))
 
 
+def test_a_smooth_motion_sampled_fast_has_no_period():
+    # one period of a 6 s Fourier excitation (5 harmonics) at 500 Hz, its ends trimmed: it never
+    # repeats, yet its unbiased autocorrelation creeps over 1 in the first lags, and a "period" of
+    # 2-4 samples repeats within 2 % (a UR5 log read as 890 periods of 6 ms)
+    T, fs = 6.0, 500.0
+    t = np.arange(int(T * fs)) / fs
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        q = np.stack([sum(rng.uniform(0.05, 0.3) / h * np.sin(2 * np.pi * h * t / T + rng.uniform(0, 2 * np.pi))
+                          for h in range(1, 6)) for _ in range(6)], axis=1)
+        assert find_period(q[150:-150]) is None, seed
+        # three periods of the same motion: the period is found (the autocorrelation's peak, within
+        # a few samples of it)
+        k = find_period(np.concatenate([q, q, q]))
+        assert k is not None and abs(k - t.size) <= 0.002 * t.size, seed
+
+
 def test_black_box_floor_does_not_count_structured_error_as_noise():
     # a record that does not repeat (two incommensurate periods); its nominal residual holds
     # Coulomb and viscous friction and a sensor delay (functions of the motion) plus coloured noise

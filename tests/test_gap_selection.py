@@ -5,7 +5,7 @@ any set of effects, and hence every shrink and score, follows without a fit."""
 import numpy as np
 import pytest
 
-from jflex.gap import DECISIVE_SCORE, MIN_NAMED_SHRINK, forward_select, gap_summary
+from jflex.gap import DECISIVE_SCORE, MIN_NAMED_SHRINK, forward_select, gap_summary, is_significant
 
 FLOOR = {"v": 1.0}
 
@@ -83,3 +83,77 @@ def test_on_select_reports_probation_steps_once_accepted():
     forward_select(s0, ev0, FLOOR, cands, refit, n_params=lambda c: 1, max_effects=3,
                    min_first_shrink=MIN_NAMED_SHRINK, on_select=lambda st: seen.append(st.cand))
     assert seen == ["b", "a"]
+
+
+def test_a_large_gap_left_over_is_not_explained_whatever_share_closed():
+    from jflex.gap import EXPLAINED_FLOOR_FACTOR, verdict
+
+    # a real TIAGo log: 80 % of the excess closed, 504 % left against a floor of 46 % whose 95 %
+    # interval is 36.5-62.2 %: ten times the floor left over is no explanation
+    assert verdict(True, True, True, 80.5, gap_after=504.0, floor_upper=62.2) == "partly_explained"
+    # the same share closed leaving a gap inside twice the floor's upper end is
+    assert verdict(True, True, True, 80.5, gap_after=EXPLAINED_FLOOR_FACTOR * 62.2 - 0.1, floor_upper=62.2) == "explained"
+    # a small gap left but too little of the excess closed stays partly explained
+    assert verdict(True, True, True, 60.0, gap_after=60.0, floor_upper=62.2) == "partly_explained"
+    # what remains within noise is explained whatever the sizes
+    assert verdict(True, False, True, 30.0, gap_after=504.0, floor_upper=62.2) == "explained"
+    # without the sizes a significant remainder is never explained
+    assert verdict(True, True, True, 99.0) == "partly_explained"
+    assert verdict(True, True, False, 99.0, gap_after=1.0, floor_upper=62.2) == "unexplained"
+
+
+def test_pooled_upper_end_of_the_floor():
+    from jflex.gap import pooled_upper
+
+    # RMS over the sets of each set's upper end, its floor where no interval is known
+    floor = {"a": 1.0, "b": 2.0, "c": 3.0}
+    assert pooled_upper(floor, {"a": 1.5, "b": None}) == pytest.approx(np.sqrt((1.5**2 + 2.0**2 + 3.0**2) / 3))
+
+
+def _two_joint_problem(small_after):
+    """A heavy joint whose gap no candidate closes and a light one (1e-5 of the torque energy)
+    whose 12 % gap the candidate ``drive`` brings to ``small_after``; ``other`` closes a little of
+    the pooled gap. Pooled as the diagnosis pools: sqrt(sum_j w_j nrmse_j^2)."""
+    w = {"big": 1.0 - 1e-5, "small": 1e-5}
+    gaps = {(): {"big": 1.10, "small": 12.0}, ("drive",): {"big": 1.10, "small": small_after},
+            ("other",): {"big": 1.06, "small": 12.0}}
+
+    def ev(added):
+        ch = gaps[tuple(sorted(added))] if tuple(sorted(added)) in gaps else gaps[()]
+        pooled = float(np.sqrt(sum(w[c] * v**2 for c, v in ch.items())))
+        return {"v": {"kind": "torque", "nrmse": pooled, "channels": dict(ch), "neff": 600.0}}
+
+    refit = lambda state, c: (state + (c,), ev(state + (c,)))
+    return ev, refit
+
+
+def test_a_gap_on_a_light_joint_is_named_on_that_joints_evidence():
+    # the pooled gap barely moves (the light joint weighs nothing in it), so the pooled criterion is
+    # no evidence; the joint's own (12 % -> 0.4 %, within its 4 % floor) is
+    floor, cfloor = {"v": 0.37}, {"v": {"big": 0.40, "small": 4.0}}
+    for small_after, named in ((0.4, ["drive"]), (6.0, [])):
+        ev, refit = _two_joint_problem(small_after)
+        sel = forward_select((), ev(()), floor, ["drive", "other"], refit, n_params=lambda c: 3, max_effects=3,
+                             min_first_shrink=MIN_NAMED_SHRINK, channel_floor=cfloor)
+        assert [s.cand for s in sel.steps] == named, small_after
+
+
+def test_a_joint_beyond_its_floor_under_a_pooled_gap_within_noise():
+    from jflex.gap._selection import joints_beyond_floor
+
+    # the pooled gap (1.10 %) is within its floor (1.0 %: 1.2 x 1.0 + 0.2 = 1.4), the light joint's
+    # 12 % is three times its own 4 % floor
+    floor, cfloor = {"v": 1.0}, {"v": {"big": 1.0, "small": 4.0}}
+    ev, refit = _two_joint_problem(0.4)
+    assert not is_significant(ev(()), floor)
+    assert joints_beyond_floor(ev(()), cfloor) == [("v", "small")]
+    for small_after, named, stop in ((0.4, ["drive"], "within noise"), (6.0, [], "joint")):
+        ev, refit = _two_joint_problem(small_after)
+        sel = forward_select((), ev(()), floor, ["drive", "other"], refit, n_params=lambda c: 3, max_effects=3,
+                             min_first_shrink=MIN_NAMED_SHRINK, channel_floor=cfloor, significant=True,
+                             joint_only=True)
+        assert [s.cand for s in sel.steps] == named and sel.stop == stop, small_after
+    # without joint_only, a pooled gap within noise names nothing
+    sel = forward_select((), ev(()), floor, ["drive", "other"], refit, n_params=lambda c: 3, max_effects=3,
+                         min_first_shrink=MIN_NAMED_SHRINK, channel_floor=cfloor)
+    assert sel.steps == [] and sel.stop == "not significant"

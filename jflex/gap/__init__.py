@@ -7,6 +7,7 @@ from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose
 from ._effect_term import EffectCandidate as EffectCandidate
 from ._noise import find_period as find_period, noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
 from ._selection import (
+    EXPLAINED_FLOOR_FACTOR as EXPLAINED_FLOOR_FACTOR,
     EXPLAINED_SHRINK as EXPLAINED_SHRINK,
     MIN_GAP as MIN_GAP,
     MIN_NAMED_SHRINK as MIN_NAMED_SHRINK,
@@ -20,7 +21,9 @@ from ._selection import (
     gap_summary as gap_summary,
     ic_delta as ic_delta,
     is_significant as is_significant,
+    pooled_upper as pooled_upper,
     rank_entries as rank_entries,
+    remaining_small as remaining_small,
     step_record as step_record,
     verdict as verdict,
     resolved_channels as resolved_channels,

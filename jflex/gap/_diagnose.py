@@ -34,7 +34,7 @@ from ._response import cad_spread as cad_spread_response
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
 from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
-                         decisive, is_significant, rank_entries, step_record, stop_reason, verdict, vetoed,
+                         decisive, is_significant, joints_beyond_floor, pooled_upper, rank_entries, step_record, stop_reason, verdict, vetoed,
                          worse_channels)
 from ._frequency_kinds import frequency_kinds
 from ._signatures import indistinguishable_from_inertia, n_params, signature_name, signatures
@@ -177,6 +177,10 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c), cfloor, st))
         say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
     significant = is_significant(ev0, floor, upper) or decisive(ranking)
+    # a gap confined to a light joint (a wrist's: 1e-6 of the torque energy) never shows pooled:
+    # the joint beyond its own floor is a gap of its own, which only an effect resolving that joint
+    # on its own evidence may explain
+    joint_only = not significant and bool(joints_beyond_floor(ev0, cfloor))
     order = rank_entries(ranking)
     ranking = [ranking[i] for i in order]
     keep = [keep[i] for i in order]
@@ -223,7 +227,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
 
     sel = forward_select(nom, ev0, floor, pool, refit, refine=refine, n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain), pb), max_effects=max_effects if keep else 0,
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
-                         first=fitted, on_select=on_select, significant=significant,
+                         first=fitted, on_select=on_select, significant=significant or joint_only, joint_only=joint_only,
                          channel_floor=cfloor, upper=upper, implausible=lambda c, st: _implausible(pb, c, st),
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of
                          # the excess is not named (the least bad candidate is not a diagnosis), unless it
@@ -246,7 +250,11 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                                   known_pair=pair in CONFOUNDED, shrink=[a["shrink"], b["shrink"]]))
     gap_after, _, exc_after = gap_summary(ev_cur, floor)
     shrink_total = float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0
-    verdict_ = verdict(significant, is_significant(ev_cur, floor, upper), bool(sel.steps), shrink_total)
+    floor_high = pooled_upper(floor, upper)
+    remaining = is_significant(ev_cur, floor, upper) or (joint_only and bool(joints_beyond_floor(ev_cur, cfloor)))
+    significant = significant or joint_only
+    verdict_ = verdict(significant, remaining, bool(sel.steps), shrink_total,
+                       gap_after=gap_after, floor_upper=floor_high)
     reason = stop_reason(sel, pb.names)
     failed_floor = {k: v["reason"] for k, v in floor_details.items() if v.get("failed")}
     spread = _cad_spread(pb, nom) if verdict_ == "unexplained" else {}
@@ -267,7 +275,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     moves, inertia_note = _inertia_report(pb, nom)
     result = dict(
         case=str(case.path), verdict=verdict_, stop_reason=reason, cad_spread=spread,
-        gap_before=gap0, gap_after=gap_after, noise_floor=fl,
+        gap_before=gap0, gap_after=gap_after, noise_floor=fl, noise_floor_upper=floor_high,
         noise_floor_per_dataset=floor, noise_floor_source=floor_source, noise_floor_details=floor_details,
         noise_floor_failed=failed_floor, excess_before=exc0, excess_after=exc_after,
         gap_weighting=GAP_WEIGHTING,
@@ -283,7 +291,8 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                                     relative_residual=float(v)) for c, v in held.items()],
 
         processing={s_.name: s_.processing for s_ in pb.ttrain + pb.tval if s_.processing},
-        significant=bool(significant), remaining_significant=bool(is_significant(ev_cur, floor, upper)),
+        significant=bool(significant), remaining_significant=bool(remaining),
+        joints_beyond_floor=[dict(dataset=k, channel=c) for k, c in joints_beyond_floor(ev0, cfloor)],
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
         parameters=parameters(pb, state), nominal_parameters=parameters(pb, nom),
         unmatched_modes=[w for w in wh if w.get("unmatched")],

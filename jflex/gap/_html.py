@@ -50,8 +50,9 @@ TERMS = [
 ]
 
 VERDICTS = {
-    "explained": "the selected effects bring the gap to the noise floor or close most of the excess",
-    "partly_explained": "an effect was named but a significant gap remains",
+    "explained": ("the selected effects bring the gap to the noise floor, or close at least 80 % of the excess "
+                  "and leave a gap of at most twice the upper end of the noise floor's interval"),
+    "partly_explained": "an effect was named but a significant gap remains, larger than twice the noise floor's upper end",
     "unexplained": "no effect of the candidate library closes enough of the gap to be named",
     "within_noise": "the nominal model's gap is already within the noise floor",
     "floor_unknown": "the noise floor could not be estimated, so whether the gap exceeds the noise is unknown",
