@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import ast
 import importlib
+import json
 import importlib.util
 import os
 import pathlib
@@ -337,6 +338,22 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _clock_for(args):
+    # the commands that compute (not --help-like ones): how much of them was tracing and compiling
+    if getattr(args, "command", None) not in ("demo", "run", "diagnose") or getattr(args, "list", False):
+        return None
+    from ._compile_clock import CompileClock
+
+    return CompileClock()
+
+
+def _report_clock(clock, args) -> None:
+    print(f"jflex {args.command}: {clock.line()}", file=sys.stderr)
+    out = getattr(args, "out", None)
+    if out and pathlib.Path(out).is_dir():
+        (pathlib.Path(out) / "compile_time.json").write_text(json.dumps(clock.summary(), indent=1) + "\n")
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
@@ -346,7 +363,11 @@ def main(argv=None) -> int:
             from ._compilation_cache import enable_compilation_cache
 
             enable_compilation_cache(args.cache_dir)
-        return args.fn(args)
+        clock = _clock_for(args)
+        code = args.fn(args)
+        if clock is not None:
+            _report_clock(clock, args)
+        return code
     except JFlexError as exc:
         print(f"jflex: error: {exc}", file=sys.stderr)
         return 2

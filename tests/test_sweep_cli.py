@@ -91,14 +91,23 @@ def test_sweep_rejects_mismatched_batch():
         jflex.sweep(lambda a, b: a + b, np.zeros((3, 2)), np.zeros((4, 2)))
 
 
-def test_cli_info_and_demo(tmp_path):
+def test_cli_info_and_demo(tmp_path, capsys):
+    import time
+
     from jflex.cli import main
 
     assert main(["info", "staubli_tx200"]) == 0
     out = tmp_path / "demo"
     cfg = tmp_path / "demo.yaml"
     cfg.write_text(open(os.path.join(ROOT, "configs", "demo.yaml")).read().replace("n: 61", "n: 9"))
+    t0 = time.perf_counter()
     assert main(["demo", str(cfg), "--out", str(out)]) == 0
+    wall = time.perf_counter() - t0
+    # how much of the run was tracing and compiling: said on stderr and kept beside the results,
+    # within the wall time this test measured around the command
+    clock = json.loads((out / "compile_time.json").read_text())
+    assert 0 < clock["tracing_and_compiling_s"] <= clock["wall_s"] <= wall and clock["programs"] >= 1
+    assert "tracing and compiling" in capsys.readouterr().err
     res = json.loads((out / "results.json").read_text())
     assert res and all((out / p).exists() for p in res.get("plots", []))
     # the rigid maps are of the robot diagnosed (the demo case's 3-joint arm), not another one
