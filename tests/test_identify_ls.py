@@ -159,6 +159,13 @@ def test_physical_fit_consistent_and_reproduces_torques():
         jflex.check_inertia(lift.inertia[i], f"lifted link {i}")
 
 
+def _cad_prior(truth):
+    """The truth scattered by +-30 %, with a wrong but consistent CAD guess of the inertias."""
+    prior = truth * np.random.default_rng(2).uniform(0.7, 1.3, size=truth.shape)
+    prior[:30] = np.asarray(staubli_like(9).inertia).ravel()
+    return prior
+
+
 def test_physical_fit_on_the_compressed_system_gives_the_full_answer():
     # |W(A th - y)|^2 = |R th - Q^T W y|^2 + const: same gradient and Gauss-Newton matrix, so the
     # QR-compressed fit (p rows a step) takes the steps the fit over every sample takes
@@ -166,9 +173,7 @@ def test_physical_fit_on_the_compressed_system_gives_the_full_answer():
     reg = idf.Regressor(compensator=(1, 3))
     samples, tau, (fv, fc, B) = _friction_data(robot, 60, 13, noise=np.array([0.05, 0.05, 0.05]))
     A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
-    truth = np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B))
-    prior = truth * np.random.default_rng(2).uniform(0.7, 1.3, size=truth.shape)
-    prior[:30] = np.asarray(staubli_like(9).inertia).ravel()
+    prior = _cad_prior(np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B)))
     w_joint = np.array([1.0, 0.5, 2.0])
     kw = dict(prior=prior, prior_weight=1e-4, max_steps=40)
     for weights in (None, w_joint):
@@ -194,9 +199,7 @@ def test_physical_fit_stops_when_the_cost_stalls_within_a_fraction_of_one_chi_sq
     reg = idf.Regressor(compensator=(1, 3))
     samples, tau, (fv, fc, B) = _friction_data(robot, 150, 13, noise=np.array([0.05, 0.05, 0.05]))
     A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
-    truth = np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B))
-    prior = truth * np.random.default_rng(2).uniform(0.7, 1.3, size=truth.shape)
-    prior[:30] = np.asarray(staubli_like(9).inertia).ravel()
+    prior = _cad_prior(np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B)))
     quick = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4)
     long = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4, max_steps=600, stall_chi2=0.0)
     assert quick.stop in ("converged", "cost stalled") and quick.steps <= long.steps
