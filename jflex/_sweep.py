@@ -168,6 +168,27 @@ def _flag_summary(out_flags):
 _reduce_jit = jax.jit(_flag_summary)
 
 
+def flagged_vmap(item_fn, in_axes=0):
+    """``jit(vmap(item_fn, in_axes))`` with the library's checks inside ``item_fn`` as output flags
+    raised on the host (see :class:`_Checked`): a program JAX's persistent compilation cache can
+    store (it stores none that calls back into Python) and a GPU runs without handing control
+    back to the host. Arguments are traced as ``equinox.filter_jit`` traces them."""
+
+    @eqx.filter_jit
+    def program(*args):
+        messages = []
+        out, failed, first = _flag_summary(jax.vmap(_checks.collecting(item_fn, messages), in_axes=in_axes)(*args))
+        return out, failed, first, tuple(messages)
+
+    @functools.wraps(item_fn)
+    def call(*args):
+        out, failed, first, messages = program(*args)
+        _raise_failed(failed, first, messages)
+        return out
+
+    return call
+
+
 class _Checked:
     """A batch program whose checks (non-finite inputs, a singular mass matrix, ...) come back as
     flags: no callback into Python inside the compiled kernel (a GPU would stop for one on every

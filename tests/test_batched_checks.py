@@ -2,6 +2,7 @@
 compiled batch program (a GPU would hand control back to the host on every call): the checks
 come back as flags and the host raises the failed one's message, naming the batch item."""
 
+import pathlib
 import re
 
 import jax
@@ -108,3 +109,38 @@ def test_sweep_raises_a_failed_check_naming_the_item_of_the_whole_sweep(arm):
     bad[37, 2] = np.nan  # in the third chunk of 16
     with pytest.raises(jflex.DataError, match=r"aba: q contains NaN/inf \(batch item 37"):
         jflex.sweep(f, bad, chunk_size=16, progress=False)
+
+
+def test_flagged_vmap_holds_no_callback_and_names_the_failed_row(arm, tmp_path):
+    from jflex._sweep import flagged_vmap
+
+    robot, model = arm
+    rows = flagged_vmap(lambda r, q, v, a: jflex.rnea(r, q, v, a), in_axes=(None, 0, 0, 0))
+    q, v, a = np.random.default_rng(3).uniform(-1, 1, (3, 12, robot.nq))
+    data = model.createData()
+    ref = np.array([pin.rnea(model, data, q[i], v[i], a[i]) for i in range(12)])
+    np.testing.assert_allclose(np.asarray(rows(robot, q, v, a)), ref, rtol=1e-10, atol=1e-10)
+    bad = v.copy()
+    bad[7, 0] = np.inf
+    with pytest.raises(jflex.DataError, match=r"rnea: qd contains NaN/inf \(batch item 7"):
+        rows(robot, q, bad, a)
+    # JAX's persistent cache stores it (it stores no program with a callback into Python)
+    import subprocess
+    import sys
+
+    code = f"""
+import numpy as np, jax, jflex, logging, sys
+sys.path.insert(0, {str(pathlib.Path(__file__).parent)!r})
+from test_batched_checks import ARM
+from jflex._sweep import flagged_vmap
+jflex.enable_compilation_cache({str(tmp_path)!r}, min_compile_time_s=0.0)
+robot = jflex.from_urdf_string(ARM, name="arm")
+rows = flagged_vmap(lambda r, q, v, a: jflex.rnea(r, q, v, a), in_axes=(None, 0, 0, 0))
+q = np.zeros((4, robot.nq))
+rows(robot, q, q, q)
+print("OK")
+"""
+    for _ in range(2):
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0 and "OK" in res.stdout, res.stderr[-2000:]
+    assert any(tmp_path.rglob("*jit_program*"))
