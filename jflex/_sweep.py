@@ -176,8 +176,18 @@ def flagged_vmap(item_fn, in_axes=0):
 
     @eqx.filter_jit
     def program(*args):
+        axes = in_axes if isinstance(in_axes, (tuple, list)) else (in_axes,) * len(args)
+        # unmapped arguments are closed over, not passed through vmap: they may hold non-array leaves
+        fixed = {i: a for i, (a, ax) in enumerate(zip(args, axes)) if ax is None}
+
+        def item(*mapped):
+            rest = iter(mapped)
+            return item_fn(*(fixed[i] if i in fixed else next(rest) for i in range(len(args))))
+
         messages = []
-        out, failed, first = _flag_summary(jax.vmap(_checks.collecting(item_fn, messages), in_axes=in_axes)(*args))
+        mapped_args = [a for i, a in enumerate(args) if i not in fixed]
+        mapped_axes = [ax for ax in axes if ax is not None]
+        out, failed, first = _flag_summary(jax.vmap(_checks.collecting(item, messages), in_axes=mapped_axes)(*mapped_args))
         return out, failed, first, tuple(messages)
 
     @functools.wraps(item_fn)

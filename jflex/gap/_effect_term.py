@@ -23,6 +23,7 @@ import numpy as np
 
 from .._dynamics import rnea
 from .._errors import ParameterError
+from .._sweep import flagged_vmap
 from .._model import Model, _effect_energy, initial_state
 from ..identify._fit import Free, ParameterSpec
 from ._torque import TorqueTerm
@@ -125,13 +126,16 @@ def effect_forces(model: Model, t, x, xd, xdd, z):
     return tau
 
 
-@eqx.filter_jit
-def _columns(model, spec, p, q, qd, qdd):
-    def tau(pp, a, b, c):
+def _column_row(model, spec, p, a, b, c):
+    def tau(pp):
         m = spec.apply(model, pp, physical=True)
         return effect_forces(m, 0.0, a, b, c, initial_state(m))
 
-    return jax.vmap(lambda a, b, c: jax.jacfwd(tau)(p, a, b, c))(q, qd, qdd)
+    return jax.jacfwd(tau)(p)
+
+
+# checks as flags, not eqx.error_if (see _torque._id_batch): a program the compilation cache keeps
+_columns = flagged_vmap(_column_row, in_axes=(None, None, None, 0, 0, 0))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

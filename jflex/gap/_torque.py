@@ -23,6 +23,7 @@ import scipy.optimize as so
 
 from .._dynamics import rnea
 from .._errors import DataError
+from .._sweep import flagged_vmap
 from ..identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
                                 motion_band, zero_phase_lowpass)
 
@@ -84,26 +85,24 @@ def on_rows(fn, static: tuple, arrays) -> object:
     return jax.tree.map(lambda o: np.asarray(o)[:N], out)
 
 
-@jax.jit
-def _id_batch(robot, q, qd, qdd):
-    return jax.vmap(lambda a, b, c: rnea(robot, a, b, c))(q, qd, qdd)
+# Row-wise programs with RNEA's checks as flags raised on the host (flagged_vmap), not eqx.error_if:
+# JAX's persistent compilation cache stores no program that calls back into Python, and these
+# hold most of a diagnosis' compilation.
+_id_batch = flagged_vmap(lambda robot, a, b, c: rnea(robot, a, b, c), in_axes=(None, 0, 0, 0))
 
 
-@jax.jit
-def _rigid_batch(robot, q, qd, qdd):
-    """Inverse dynamics (N, n) and regressor (N, n, 10 n) along a motion. The regressor is the
-    Jacobian of RNEA in the inertial parameters (RNEA is linear in them): one JVP of the traversal
-    compiles in a fraction of the time of the per-parameter regressor."""
+def _rigid_row(robot, a, b, c):
+    """Inverse dynamics (n,) and regressor (n, 10 n) at one sample. The regressor is the Jacobian
+    of RNEA in the inertial parameters (RNEA is linear in them): one JVP of the traversal compiles
+    in a fraction of the time of the per-parameter regressor."""
     import equinox as eqx
 
     pi = robot.inertia.reshape(-1)
+    f = lambda p: rnea(eqx.tree_at(lambda r: r.inertia, robot, p.reshape(robot.inertia.shape)), a, b, c)
+    return f(pi), jax.jacfwd(f)(pi)
 
-    def f(p, a, b, c):
-        return rnea(eqx.tree_at(lambda r: r.inertia, robot, p.reshape(robot.inertia.shape)), a, b, c)
 
-    F = jax.vmap(lambda a, b, c: f(pi, a, b, c))(q, qd, qdd)
-    Y = jax.vmap(lambda a, b, c: jax.jacfwd(f)(pi, a, b, c))(q, qd, qdd)
-    return F, Y
+_rigid_batch = flagged_vmap(_rigid_row, in_axes=(None, 0, 0, 0))  # (N, n), (N, n, 10 n)
 
 
 CUTOFF_FACTOR = 2.5  # the parallel low-pass sits at 2.5 x the motion's band (2-5 x is usual)

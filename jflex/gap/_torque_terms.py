@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import _rnea
+from .._sweep import flagged_vmap
 from ..identify._signal import motion_band, zero_phase_lowpass
 from ..effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
 from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
@@ -171,12 +172,14 @@ class LawTerm(TorqueTerm):
 
 
 # --- a joint's compliance, seen in torque data -----------------------------------------------------
-@jax.jit
-def _jvp_batch(robot, q, qd, qdd, dq, dqd, dqdd):
+def _jvp_row(robot, q, qd, qdd, dq, dqd, dqdd):
     # one direction per sample: forward mode through the traversal (the public rnea's analytic
     # derivative builds every direction's matrices, and compiles longer)
     f = lambda a, b, c: _rnea(robot, a, b, c, None, "rnea")
-    return jax.vmap(lambda *x: jax.jvp(f, x[:3], x[3:])[1])(q, qd, qdd, dq, dqd, dqdd)
+    return jax.jvp(f, (q, qd, qdd), (dq, dqd, dqdd))[1]
+
+
+_jvp_batch = flagged_vmap(_jvp_row, in_axes=(None, 0, 0, 0, 0, 0, 0))  # checks as flags: see _torque._id_batch
 
 
 def link_lag_column(s: TorqueSet, j: int, lag) -> np.ndarray:
