@@ -157,3 +157,21 @@ def test_a_joint_beyond_its_floor_under_a_pooled_gap_within_noise():
     sel = forward_select((), ev(()), floor, ["drive", "other"], refit, n_params=lambda c: 3, max_effects=3,
                          min_first_shrink=MIN_NAMED_SHRINK, channel_floor=cfloor)
     assert sel.steps == [] and sel.stop == "not significant"
+
+
+def test_a_joint_resolved_at_the_pooled_gaps_expense_is_not_named():
+    # the candidate brings the light joint within its floor but grows the pooled excess by half:
+    # it stands in for something else
+    floor, cfloor = {"v": 1.0}, {"v": {"big": 1.0, "small": 4.0}}
+    w = {"big": 1.0 - 1e-5, "small": 1e-5}
+    gaps = {(): {"big": 1.10, "small": 12.0}, ("offset",): {"big": 1.30, "small": 0.4}}
+
+    def ev(added):
+        ch = gaps[tuple(added)]
+        return {"v": {"kind": "torque", "nrmse": float(np.sqrt(sum(w[c] * v**2 for c, v in ch.items()))),
+                      "channels": dict(ch), "neff": 600.0}}
+
+    sel = forward_select((), ev(()), floor, ["offset"], lambda st, c: (st + (c,), ev(st + (c,))), n_params=lambda c: 1,
+                         max_effects=3, min_first_shrink=MIN_NAMED_SHRINK, channel_floor=cfloor, significant=True,
+                         joint_only=True)
+    assert sel.steps == [] and sel.stop == "joint"
