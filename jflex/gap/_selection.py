@@ -80,7 +80,7 @@ def resolved_channels(ev_new, ev_old, channel_floor=None) -> list:
     cf = channel_floor or {}
     for k, ch, before, after in _channel_changes(ev_new, ev_old):
         fl = cf.get(k, {}).get(ch)
-        if fl is not None and fl > 0 and before > SIGNIFICANCE * fl + MIN_GAP and after <= fl:
+        if _beyond(before, fl) and after <= fl:
             out.append(dict(dataset=k, channel=ch, before=before, after=after, floor=float(fl)))
     return out
 
@@ -342,23 +342,24 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             weak, new = None, steps
         for st_ in new if on_select is not None else ():
             on_select(st_)
-        if not sig_(ev_cur) and not _beyond_own_floor(ev_cur, channel_floor):
+        if not sig_(ev_cur) and not joints_beyond_floor(ev_cur, channel_floor):
             return _with(vetoes, Selection(steps, state, ev_cur, "within noise"))
 
 
-def _beyond_own_floor(ev, channel_floor) -> bool:
-    """Whether some torque channel still lies beyond its own floor (``SIGNIFICANCE`` x it +
-    ``MIN_GAP``): the pooled gap within noise does not end the search then (only a candidate that
-    resolves such a joint can still be taken, :func:`resolved_channels`)."""
-    return bool(joints_beyond_floor(ev, channel_floor))
+def _beyond(gap, floor) -> bool:
+    """Whether a channel's gap [%] lies beyond its own floor [%] (``SIGNIFICANCE`` x it + ``MIN_GAP``;
+    a channel without a floor never does)."""
+    return floor is not None and floor > 0 and gap > SIGNIFICANCE * floor + MIN_GAP
 
 
 def joints_beyond_floor(ev, channel_floor) -> list:
-    """``(set, channel)`` of every torque channel whose gap exceeds ``SIGNIFICANCE`` x its own floor
-    + ``MIN_GAP`` (``channel_floor[set][channel]`` [%])."""
+    """``(set, channel)`` of every torque channel whose gap lies beyond its own floor
+    (``channel_floor[set][channel]`` [%], :func:`_beyond`). While one does, the pooled gap within
+    noise does not end the search (only a candidate that resolves such a joint can still be taken,
+    :func:`resolved_channels`)."""
     cf = channel_floor or {}
     return [(k, ch) for k, r in ev.items() if r.get("kind") == "torque"
-            for ch, v in r["channels"].items() if cf.get(k, {}).get(ch, 0) > 0 and v > SIGNIFICANCE * cf[k][ch] + MIN_GAP]
+            for ch, v in r["channels"].items() if _beyond(v, cf.get(k, {}).get(ch))]
 
 
 def _with(vetoes, sel: Selection) -> Selection:
