@@ -165,6 +165,14 @@ def _flag_summary(out_flags):
     return out, jnp.any(flags, axis=0), jnp.argmax(flags, axis=0)
 
 
+def _vmap_collected(fn, in_axes, *args):
+    """``(out, any, first, messages)`` of ``vmap(fn)`` with fn's checks collected as flags
+    (:func:`_flag_summary`); ``messages`` a tuple, a static output of an ``equinox.filter_jit``."""
+    messages = []
+    out, failed, first = _flag_summary(jax.vmap(_checks.collecting(fn, messages), in_axes=in_axes)(*args))
+    return out, failed, first, tuple(messages)
+
+
 _reduce_jit = jax.jit(_flag_summary)
 
 
@@ -184,11 +192,8 @@ def flagged_vmap(item_fn, in_axes=0):
             rest = iter(mapped)
             return item_fn(*(fixed[i] if i in fixed else next(rest) for i in range(len(args))))
 
-        messages = []
         mapped_args = [a for i, a in enumerate(args) if i not in fixed]
-        mapped_axes = [ax for ax in axes if ax is not None]
-        out, failed, first = _flag_summary(jax.vmap(_checks.collecting(item, messages), in_axes=mapped_axes)(*mapped_args))
-        return out, failed, first, tuple(messages)
+        return _vmap_collected(item, [ax for ax in axes if ax is not None], *mapped_args)
 
     @functools.wraps(item_fn)
     def call(*args):
@@ -337,9 +342,7 @@ def _vmapped(template, values, *items):
 def _vmapped_flagged(template, values, *items):
     """:func:`_vmapped` with fn's checks as flags (see :class:`_Checked`); the messages are a static
     output, kept by ``filter_jit`` with the compiled program."""
-    messages = []
-    out, failed, first = _flag_summary(jax.vmap(_checks.collecting(_rebuild(template, values), messages))(*items))
-    return out, failed, first, tuple(messages)
+    return _vmap_collected(_rebuild(template, values), 0, *items)
 
 
 def _raise_failed(failed, first, messages, start=0):
