@@ -194,12 +194,13 @@ def physical_fit(
     # placed as the solver's own results are, so its second round reuses the first's program
     u0 = jax.device_put(u0, jax.devices()[0])
     u, steps, prev, stop = u0, 0, float(cost_of(u0)) + 0.5 * offset, "step limit"
+    result = optx.RESULTS.nonlinear_max_steps_reached  # what a solver given no steps reports
     while steps < max_steps:
         # in rounds of stall_steps: the same compiled solver each round (same function and shapes)
         sol = optx.least_squares(resid, solver, u, max_steps=min(stall_steps, max_steps - steps), throw=False)
-        u, steps = sol.value, steps + int(sol.stats["num_steps"])
+        u, steps, result = sol.value, steps + int(sol.stats["num_steps"]), sol.result
         cost = float(cost_of(u)) + 0.5 * offset
-        if sol.result == optx.RESULTS.successful:
+        if result == optx.RESULTS.successful:
             stop = "converged"
             break
         if (prev - cost) * m / cost <= stall_chi2:  # the chi-square change 2 (prev - cost) / s^2, s^2 = 2 cost / m
@@ -208,4 +209,4 @@ def physical_fit(
         prev = cost
     th = np.asarray(theta_of(u))
     r = np.asarray(resid(u, None)) * ynorm
-    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), steps, sol.result, stop)
+    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), steps, result, stop)
