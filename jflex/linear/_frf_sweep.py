@@ -125,9 +125,9 @@ def frf_sweep(
     hold = hold if isinstance(hold, str) else tuple(hold)
     kw = (("hold", hold), ("frame", frame), ("reference", reference), ("components", components), ("solver", solver))
     if method == "modal":
-        poles = _poles_quick if N <= QUICK_COMPILE_POSTURES else _poles
+        quick = N <= QUICK_COMPILE_POSTURES
+        poles, synthesize = (_poles_quick, _synthesize_quick) if quick else (_poles, _synthesize)
         stage1 = lambda Qc: poles(model, Qc, kw)
-        synthesize = _synthesize_quick if N <= QUICK_COMPILE_POSTURES else _synthesize
         stage2 = lambda items, start: synthesize(items, start, omega, kind, block)
     else:
         stage1 = lambda Qc: Qc
