@@ -318,21 +318,59 @@ def weighted_inertia_columns(s: TorqueSet):
     return s.cache["Yw"]
 
 
+def _product(s: TorqueSet, key, make):
+    if key not in s.cache:
+        s.cache[key] = make()
+    return s.cache[key]
+
+
 def _gram(terms, delay, s: TorqueSet, inertia):
     """Normal equations of one set, rows normalised by the set's torque scale: ``(G, b, y'y, rows)``
     over ``[delta (if inertia), theta]``. The delay advances the measurement (``tau(t + d)``), so
-    the model's columns, and the Gram of the regressor, do not change with it."""
+    the model's columns, and the Gram of the regressor, do not change with it. Built from
+    per-term blocks kept with the set: the selection refits the same terms in many combinations,
+    and the products over every sample, not the small solve, were its cost."""
+    terms = [t for t in terms if t.n_params]
     w = 1.0 / s.scale
-    cols = [term_columns(t, s) for t in terms if t.n_params]
-    A = (np.concatenate(cols, axis=2) if cols else np.zeros(s.q.shape + (0,))) * w[None, :, None]
-    A = A.reshape(s.tau.size, A.shape[2])
-    y = ((shift(s.tau, s.t, -delay) - _filtered(s, "F0")) * w[None, :]).ravel()
+
+    memo = []
+
+    def y():
+        # the target itself is not kept (one per delay tried, each as long as the record): only
+        # its products are
+        if not memo:
+            memo.append(((shift(s.tau, s.t, -delay) - _filtered(s, "F0")) * w[None, :]).ravel())
+        return memo[0]
+
+    yy = _product(s, ("yy", delay), lambda: float(y() @ y()))
+    cols = {}
+
+    def A(i):
+        # weighted columns, made only where a product is missing (the filtered ones are cached)
+        if i not in cols:
+            c = term_columns(terms[i], s) * w[None, :, None]
+            cols[i] = c.reshape(s.tau.size, c.shape[2])
+        return cols[i]
+
+    def AtA(i, j):
+        a, b = terms[i], terms[j]
+        if ("AA", b, a) in s.cache:
+            return s.cache[("AA", b, a)].T
+        return _product(s, ("AA", a, b), lambda: A(i).T @ A(j))
+
+    m = len(terms)
+    GA = np.block([[AtA(i, j) for j in range(m)] for i in range(m)]) if m else np.zeros((0, 0))
+    bA = (np.concatenate([_product(s, ("Ay", terms[i], delay), lambda i=i: A(i).T @ y()) for i in range(m)])
+          if m else np.zeros(0))
+    rows = s.tau.size
     if inertia is None:
-        return A.T @ A, A.T @ y, float(y @ y), y.size
+        return GA, bA, yy, rows
     Yw, YtY = weighted_inertia_columns(s)
-    AtY = A.T @ Yw
-    G = np.block([[YtY, AtY.T], [AtY, A.T @ A]])
-    return G, np.concatenate([Yw.T @ y, A.T @ y]), float(y @ y), y.size
+    AtY = (np.concatenate([_product(s, ("AY", terms[i]), lambda i=i: A(i).T @ Yw) for i in range(m)])
+           if m else np.zeros((0, Yw.shape[1])))
+    G = np.block([[YtY, AtY.T], [AtY, GA]]) if GA.size else YtY
+    Yty = _product(s, ("Yy", delay), lambda: Yw.T @ y())
+    return G, np.concatenate([Yty, bA]), yy, rows
 
 
 def _bounded_normal_solve(G, b, lo, hi):
