@@ -1,5 +1,6 @@
 """Modal analysis, FRFs and MAC against the closed forms of seed 000 and SciPy references."""
 
+import jax
 import numpy as np
 import pytest
 import scipy.linalg as sla
@@ -165,23 +166,31 @@ def test_bad_kind_or_method():
 # ---- solver="newton": Newton's method from the undamped modes ---------------------------------
 
 
+# compiled once per size and shared by the cases: called eagerly, each new size cost about three
+# times the compile of the whole solve (its loops dispatched op by op); the eager path is what
+# test_newton_solver_refuses_overdamped_modes and test_newton_solver_at_a_mode_crossing call
+_newton_modes = jax.jit(lambda M, C, K: modes(M, C, K, solver="newton"))
+_eig_modes = jax.jit(lambda M, C, K: modes(M, C, K))
+_newton_frf = jax.jit(lambda M, C, K, w, T: frf_matrices(M, C, K, w, T=T, method="modal", solver="newton"))
+
+
 @pytest.mark.parametrize("n,seed", [(1, 0), (3, 1), (6, 2), (6, 3)])
 def test_newton_solver_matches_scipy_eig(n, seed):
     M, C, K = light_system(n, seed)
     Z = np.zeros((n, n))
     lam = sla.eig(-np.block([[K, Z], [Z, -M]]), np.block([[C, M], [M, Z]]), right=False)
     ref = np.sort_complex(lam[lam.imag > 0])
-    md = modes(M, C, K, solver="newton")
+    md = _newton_modes(M, C, K)
     got = np.asarray(md.eigenvalue)
     assert np.allclose(np.sort_complex(got), ref, rtol=1e-10)
-    me = modes(M, C, K)
+    me = _eig_modes(M, C, K)
     assert np.allclose(md.frequency, me.frequency, rtol=1e-10)
     assert np.allclose(md.damping_ratio, me.damping_ratio, rtol=1e-8, atol=1e-12)
     assert np.allclose(md.shape, me.shape, atol=1e-8)
     w = np.linspace(0.0, 1.5 * float(np.max(md.frequency)) * 2 * np.pi, 64)
     T = np.random.default_rng(seed).normal(size=(3, n))
     inv = np.stack([np.linalg.inv(K - wi**2 * M + 1j * wi * C) for wi in w])
-    H = np.asarray(frf_matrices(M, C, K, w, T=T, method="modal", solver="newton"))
+    H = np.asarray(_newton_frf(M, C, K, w, T))
     assert np.allclose(H, np.einsum("ij,fjk,lk->fil", T, inv, T), rtol=1e-8, atol=1e-14 * np.abs(inv).max())
 
 
@@ -195,8 +204,9 @@ def test_newton_solver_gradients_match_finite_differences():
         return jax.numpy.sum(md.frequency) + 10 * jax.numpy.sum(md.damping_ratio) + jax.numpy.abs(md.shape[0, 1])
 
     s0 = np.array([1.0, 1.0, 1.0])
-    g = np.asarray(jax.grad(f)(s0))
+    g = np.asarray(jax.jit(jax.grad(f))(s0))
     h = 1e-6
+    f = jax.jit(f)  # one compile for the six differences (eagerly, each call dispatches the solve op by op)
     fd = np.array([(f(s0 + h * e) - f(s0 - h * e)) / (2 * h) for e in np.eye(3)])
     assert np.allclose(g, fd, rtol=1e-5, atol=1e-8)
 
@@ -205,14 +215,16 @@ def test_default_solver_is_differentiable():
     import jax
 
     M, C, K = light_system(3, 6)
-    f = lambda s: jax.numpy.sum(modes(M, C * s, K).damping_ratio) + jax.numpy.abs(modes(M, C * s, K).shape[1, 0])
+    f = jax.jit(lambda s: jax.numpy.sum(modes(M, C * s, K).damping_ratio) + jax.numpy.abs(modes(M, C * s, K).shape[1, 0]))
     h = 1e-6
-    assert abs(float(jax.grad(f)(1.0)) - (f(1 + h) - f(1 - h)) / (2 * h)) < 1e-5 * max(1.0, abs(float(jax.grad(f)(1.0))))
+    g = float(jax.jit(jax.grad(f))(1.0))
+    assert abs(g - (f(1 + h) - f(1 - h)) / (2 * h)) < 1e-5 * max(1.0, abs(g))
 
 
 def test_newton_solver_refuses_overdamped_modes():
-    M, K = np.eye(2), np.diag([100.0, 400.0])
-    C = np.diag([30.0, 1.0])  # first mode overdamped (zeta = 1.5)
+    # three coordinates, the size the crossing cases below use: the eager solve compiles once per size
+    M, K = np.eye(3), np.diag([100.0, 400.0, 900.0])
+    C = np.diag([30.0, 1.0, 1.0])  # first mode overdamped (zeta = 1.5)
     with pytest.raises(Exception, match="solver='eig'"):
         np.asarray(modes(M, C, K, solver="newton").frequency)
     md = modes(M, C, K)  # the default handles it
