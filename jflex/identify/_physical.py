@@ -46,12 +46,17 @@ def log_cholesky_to_inertia(theta):
     return pseudo_inertia_to_params(log_cholesky_pseudo_inertia(theta))
 
 
+def _inertia_matrix3_np(pi):
+    # inertia_matrix3 on the host: a fit's start and its checks run no JAX program
+    return np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]], dtype=float)
+
+
 def inertia_to_log_cholesky(pi, eps: float = 1e-9):
     """Inverse map; a body on (or beyond) the boundary of consistency is first nudged inside by
     adding ``eps`` (relative) to its pseudo-inertia's eigenvalues."""
     pi = np.asarray(pi, dtype=float)
     m, h = pi[0], pi[1:4]
-    I = np.asarray(inertia_matrix3(pi))
+    I = _inertia_matrix3_np(pi)
     S = 0.5 * np.trace(I) * np.eye(3) - I
     J = np.block([[S, h[:, None]], [h[None, :], np.array([[m]])]])
     w, V = np.linalg.eigh(J)
@@ -70,7 +75,7 @@ def inertia_to_log_cholesky(pi, eps: float = 1e-9):
 def is_consistent(pi, tol: float = 1e-9) -> bool:
     """Whether 10 inertial parameters describe a physical body (pseudo-inertia PSD)."""
     pi = np.asarray(pi, dtype=float)
-    I = np.asarray(inertia_matrix3(pi))
+    I = _inertia_matrix3_np(pi)
     S = 0.5 * np.trace(I) * np.eye(3) - I
     J = np.block([[S, pi[1:4, None]], [pi[None, 1:4], np.array([[pi[0]]])]])
     w = np.linalg.eigvalsh(J)
@@ -166,11 +171,10 @@ def physical_fit(
         prior[:ni] = np.tile([1.0, 0, 0, 0, 1e-2, 0, 1e-2, 0, 0, 1e-2], n_links)
     prior = np.asarray(prior, dtype=float)
     u0_in = np.concatenate([inertia_to_log_cholesky(prior[10 * i : 10 * i + 10]) for i in range(n_links)])
-    u0 = jnp.asarray(np.concatenate([u0_in, prior[ni:]]))
+    u0 = np.concatenate([u0_in, prior[ni:]])
     # scales of the full system (|A|_F is |R|_F): the compressed fit solves the same problem
     scale = np.linalg.norm(A) / np.sqrt(m)
     w = prior_weight * scale
-    prior_j = jnp.asarray(prior)
     # Rows are scaled by the column norms so that kg and kg m^2 columns weigh alike.
     ynorm = max(float(np.linalg.norm(y)), 1e-300)
     offset = 0.0  # |y|^2 - |Q^T y|^2: the part of the cost no theta can change
@@ -179,27 +183,23 @@ def physical_fit(
         Rxy = np.linalg.qr(np.column_stack([A, y]), mode="r")
         A, y = Rxy[:p, :p], Rxy[:p, p]
         offset = float(Rxy[p, p] ** 2) if Rxy.shape[0] > p else 0.0
-    A, y = jnp.asarray(A), jnp.asarray(y)
-
-    def theta_of(u):
-        inert = jax.vmap(log_cholesky_to_inertia)(u[:ni].reshape(n_links, 10)).ravel()
-        return jnp.concatenate([inert, u[ni:]])
-
-    def resid(u, _):
-        th = theta_of(u)
-        return jnp.concatenate([(A @ th - y) / ynorm, w * (th - prior_j) / ynorm])
-
+    args = tuple(jnp.asarray(v) for v in (A, y, prior, w, ynorm))
+    resid, finish = _programs(n_links)
     solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-12, atol=1e-14)
-    cost_of = jax.jit(lambda u: 0.5 * jnp.sum((resid(u, None) * ynorm) ** 2))
     # placed as the solver's own results are, so its second round reuses the first's program
     u0 = jax.device_put(u0, jax.devices()[0])
-    u, steps, prev, stop = u0, 0, float(cost_of(u0)) + 0.5 * offset, "step limit"
+
+    def cost_of(u):
+        return 0.5 * float(np.sum(np.asarray(finish(u, args)[1]) ** 2)) + 0.5 * offset
+
+    u, steps, prev, stop = u0, 0, cost_of(u0), "step limit"
     result = optx.RESULTS.nonlinear_max_steps_reached  # what a solver given no steps reports
     while steps < max_steps:
         # in rounds of stall_steps: the same compiled solver each round (same function and shapes)
-        sol = optx.least_squares(resid, solver, u, max_steps=min(stall_steps, max_steps - steps), throw=False)
+        sol = optx.least_squares(resid, solver, u, args=args, max_steps=min(stall_steps, max_steps - steps),
+                                 throw=False)
         u, steps, result = sol.value, steps + int(sol.stats["num_steps"]), sol.result
-        cost = float(cost_of(u)) + 0.5 * offset
+        cost = cost_of(u)
         if result == optx.RESULTS.successful:
             stop = "converged"
             break
@@ -207,6 +207,32 @@ def physical_fit(
             stop = "cost stalled"
             break
         prev = cost
-    th = np.asarray(theta_of(u))
-    r = np.asarray(resid(u, None)) * ynorm
+    th, r = (np.asarray(v) for v in finish(u, args))
     return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), steps, result, stop)
+
+
+_PROGRAMS: dict = {}
+
+
+def _programs(n_links: int):
+    """The residual ``(u, args) -> r`` and ``(u, args) -> (theta, unscaled r)`` for ``n_links``
+    bodies, made once per count: the data ``args = (A, y, prior, w, ynorm)`` are arguments, not
+    constants, so every fit of the same shapes in a process runs the programs already compiled."""
+    if n_links not in _PROGRAMS:
+        ni = 10 * n_links
+
+        def theta_of(u):
+            inert = jax.vmap(log_cholesky_to_inertia)(u[:ni].reshape(n_links, 10)).ravel()
+            return jnp.concatenate([inert, u[ni:]])
+
+        def resid(u, args):
+            A, y, prior, w, ynorm = args
+            th = theta_of(u)
+            return jnp.concatenate([(A @ th - y) / ynorm, w * (th - prior) / ynorm])
+
+        @jax.jit
+        def finish(u, args):
+            return theta_of(u), resid(u, args) * args[4]
+
+        _PROGRAMS[n_links] = (resid, finish)
+    return _PROGRAMS[n_links]
