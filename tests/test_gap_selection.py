@@ -175,3 +175,42 @@ def test_a_joint_resolved_at_the_pooled_gaps_expense_is_not_named():
                          max_effects=3, min_first_shrink=MIN_NAMED_SHRINK, channel_floor=cfloor, significant=True,
                          joint_only=True)
     assert sel.steps == [] and sel.stop == "joint"
+
+
+def _table_problem(left):
+    """Gaps from a table: ``left[frozenset(effects)]`` is the squared excess those effects leave."""
+
+    def ev(added):
+        return {"v": {"nrmse": float(np.sqrt(1.0 + left[frozenset(added)])), "neff": 1000.0}}
+
+    refit = lambda state, c: (state + (c,), ev(state + (c,)))  # noqa: E731
+    return ev, refit
+
+
+@pytest.mark.parametrize("shape_left, swapped", [(0.0, True), (0.28, False)])
+def test_a_rival_that_closes_what_the_selected_effect_left_takes_its_place(shape_left, swapped):
+    # alone, an offset closes a little more than the spring that is really there (its constant
+    # part); beside the rotor inertia also selected, the spring closes what the offset leaves (its
+    # shape): it takes the offset's place, unless the gain is below MIN_STEP_SHRINK of the excess
+    from jflex.gap._selection import MIN_STEP_SHRINK, swap_rivals
+
+    F = frozenset
+    left = {F(): 40.0, F({"offset"}): 13.0, F({"spring"}): 13.5, F({"rotor"}): 30.0,
+            F({"offset", "rotor"}): 0.3, F({"spring", "rotor"}): shape_left, F({"offset", "spring"}): 12.0,
+            F({"offset", "spring", "rotor"}): 0.0}
+    ev, refit = _table_problem(left)
+    sel = forward_select((), ev(()), FLOOR, ["offset", "spring", "rotor"], refit, n_params=lambda c: 1,
+                         max_effects=3, min_first_shrink=MIN_NAMED_SHRINK)
+    assert [s.cand for s in sel.steps] == ["offset", "rotor"] and sel.stop == "within noise"
+    new, swaps = swap_rivals(sel, ev(()), FLOOR, lambda c: {"offset": ["spring"]}.get(c, []), refit,
+                             n_params=lambda c: 1)
+    _, _, exc_before = gap_summary(sel.ev, FLOOR)
+    if swapped:
+        assert [s.cand for s in new.steps] == ["spring", "rotor"] and new.state == ("spring", "rotor")
+        assert swaps == [("offset", "spring", pytest.approx(exc_before), pytest.approx(0.0))]
+        # each rebuilt step knows the model it was added to and what it closed of that model's excess
+        assert new.steps[1].state_before == ("spring",)
+        assert new.steps[0].step_shrink == pytest.approx(100 * (1 - np.sqrt(13.5) / np.sqrt(40.0)))
+    else:
+        assert 100 * (1 - np.sqrt(shape_left) / exc_before) < MIN_STEP_SHRINK
+        assert new is sel and swaps == []

@@ -33,8 +33,8 @@ from ._inertia import inertia_prior, link_moves
 from ._response import cad_spread as cad_spread_response
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
-from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, forward_select, gap_summary, ic_delta,
-                         decisive, is_significant, joints_beyond_floor, pooled_upper, rank_entries, step_record, stop_reason, verdict, vetoed,
+from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWAP_SHRINK, forward_select, gap_summary,
+                         ic_delta, decisive, swap_rivals, is_significant, joints_beyond_floor, pooled_upper, rank_entries, step_record, stop_reason, verdict, vetoed,
                          worse_channels)
 from ._frequency_kinds import frequency_kinds
 from ._signatures import indistinguishable_from_inertia, n_params, signature_name, signatures
@@ -234,6 +234,21 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                          # supplies a measured mode the model lacked (a missing degree of freedom)
                          min_first_shrink=lambda st: (MIN_STEP_SHRINK if supplies_missing_mode(ev0, st.ev)
                                                       else MIN_NAMED_SHRINK))
+    swaps = []
+    if sel.steps and not any(st.cand.effect == "joint_flexibility" or pb.screened_by_simulation(nom, st.cand)
+                             for st in sel.steps):
+        # a rival that alone closed nearly as much may hold the data's shape beside the other
+        # effects (rebuilt with plain refits: a spring identified through the simulation is not)
+        def rivals(c):
+            return [k for k in keep if k != c and k.joint == c.joint and k.effect != c.effect
+                    and k.effect != "joint_flexibility" and not pb.screened_by_simulation(nom, k)
+                    and abs(alone.get(k, -1e9) - alone.get(c, 1e9)) < SWAP_SHRINK][:2]
+
+        sel, swaps = swap_rivals(sel, ev0, floor, rivals, refit,
+                                 n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain), pb),
+                                 channel_floor=cfloor, implausible=lambda c, st: _implausible(pb, c, st))
+        for old_c, new_c, e0, e1 in swaps:
+            say(f"{new_c.label(pb.names)} takes the place of {old_c.label(pb.names)}: excess {e0:.2f} -> {e1:.2f} %")
     selected = []
     for st in sel.steps:
         selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score, None, cfloor, st.state))
@@ -294,6 +309,8 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         significant=bool(significant), remaining_significant=bool(remaining),
         joints_beyond_floor=[dict(dataset=k, channel=c) for k, c in joints_beyond_floor(ev0, cfloor)],
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
+        swapped=[dict(replaced=a.label(pb.names), by=b.label(pb.names), excess_before=e0, excess_after=e1)
+                 for a, b, e0, e1 in swaps],
         parameters=parameters(pb, state), nominal_parameters=parameters(pb, nom),
         unmatched_modes=[w for w in wh if w.get("unmatched")],
         responses_output_error=[s.name for s in pb.rval],

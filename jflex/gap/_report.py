@@ -229,6 +229,12 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
             L.append(f"- {_html.placed(a['effects'][0], a['joints'][0])} vs {_html.placed(a['effects'][1], a['joints'][1])}: shrink "
                      f"{a['shrink'][0]:.0f} % vs {a['shrink'][1]:.0f} %{' (a known confounded pair)' if a['known_pair'] else ''}; "
                      "more data sets or postures are needed to separate them.")
+    if r.get("swapped"):
+        L += ["", "## Rivals tried beside the other effects", "",
+              "Alone, these effects closed nearly the same share; with the other selected effects in the model, "
+              "the second closed what the first left:", ""]
+        L += [f"- {w['by']} in place of {w['replaced']}: excess over noise {w['excess_before']:.2f} -> "
+              f"{w['excess_after']:.2f} %" for w in r["swapped"]]
     L += ["", "## Candidate ranking (each added alone to the nominal model)", "",
           "| # | effect | joint / link | gap after [%] | shrink [%] | score | signature |", "|---|---|---|---|---|---|---|"]
     for i, s in enumerate(r["ranking"][:15]):

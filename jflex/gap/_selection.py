@@ -179,6 +179,7 @@ class Step:
     ev_before: dict
     score: float  # held-out information-criterion gain (-ic_delta against the model before)
     step_shrink: float  # % of the excess before this step that it closed
+    state_before: object = None  # the model it was added to
 
 
 @dataclasses.dataclass
@@ -294,13 +295,13 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
                 elif simpler(c, best[1].cand) and best[1].step_shrink >= step_shrink - PARSIMONY:
                     key = (-np.inf, -np.inf)
             if best is None or key > best[0]:
-                best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink)))
+                best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink), state))
             # (one that makes the pooled gap worse by a step's share stands in for something else:
             # an offset at a Panda's joint 2 "resolved" joint 3 while the pooled excess grew 52 %)
             if resolved_channels(ev, ev_cur, channel_floor) and step_shrink > -MIN_STEP_SHRINK:
                 jscore = max(score, channel_score(ev, ev_cur, n_params(c)))
                 if jscore >= DECISIVE_SCORE and (local is None or jscore > local[0]):
-                    local = (jscore, Step(c, st, ev, ev_cur, float(score), float(step_shrink)))
+                    local = (jscore, Step(c, st, ev, ev_cur, float(score), float(step_shrink), state))
         if best is None:
             return _with(vetoes, on_probation("no candidate") if weak else Selection(steps, state, ev_cur, "no candidate"))
         step = best[1]
@@ -344,6 +345,49 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             on_select(st_)
         if not sig_(ev_cur) and not joints_beyond_floor(ev_cur, channel_floor):
             return _with(vetoes, Selection(steps, state, ev_cur, "within noise"))
+
+
+SWAP_SHRINK = 5.0  # [%] alone, an effect at the same place within this of a selected one is its rival
+
+
+def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_params, channel_floor=None,
+                implausible=None) -> tuple[Selection, list]:
+    """Each selected effect is tried against its rivals (``rivals(cand) -> list``: effects at the
+    same place that alone closed nearly as much) inside the final model: the model is rebuilt from
+    the nominal one with the rival in the effect's place and the other effects as selected, and
+    the rival takes the place when the final excess falls by at least ``MIN_STEP_SHRINK`` % with no
+    joint made worse beyond its floor and a plausible fit. Alone, two effects can close the same
+    share (a constant offset and a spring over a small range of a joint's angle); beside the
+    others, the one that holds the data's shape closes what the other leaves. Returns the
+    selection (steps rebuilt in order) and ``[(replaced, by, excess before, excess after)]``."""
+    swaps = []
+    for i in range(len(sel.steps)):
+        cands = [st.cand for st in sel.steps]
+        _, _, exc_cur = gap_summary(sel.ev, floor)
+        best = None
+        for alt in rivals(cands[i]):
+            if alt in cands:
+                continue
+            chain, state, ev, ok = [], None, None, True
+            for k, c in enumerate(cands[:i] + [alt] + cands[i + 1:]):
+                prev_state, prev_ev = (chain[-1].state, chain[-1].ev) if chain else (sel.steps[0].state_before, ev0)
+                state, ev = refit(prev_state, c)
+                if implausible is not None and implausible(c, state):
+                    ok = False
+                    break
+                _, _, e_prev = gap_summary(prev_ev, floor)
+                _, _, e_new = gap_summary(ev, floor)
+                chain.append(Step(c, state, ev, prev_ev, float(-ic_delta(ev, prev_ev, n_params(c))),
+                                  float(100 * (1 - e_new / e_prev)) if e_prev > 0 else 0.0, prev_state))
+            if not ok or worse_channels(ev, sel.ev, channel_floor):
+                continue
+            _, _, exc = gap_summary(ev, floor)
+            if exc <= (1 - MIN_STEP_SHRINK / 100) * exc_cur and (best is None or exc < best[0]):
+                best = (exc, alt, chain)
+        if best is not None:
+            swaps.append((cands[i], best[1], exc_cur, best[0]))
+            sel = dataclasses.replace(sel, steps=best[2], state=best[2][-1].state, ev=best[2][-1].ev)
+    return sel, swaps
 
 
 def _beyond(gap, floor) -> bool:
