@@ -36,9 +36,20 @@ def rotor_case(tmp_path_factory):
     return G.torque_case(tmp_path_factory.mktemp("gap") / "rotor", "arm3", ["rotor_inertia"], seed=11, noise=0.01)
 
 
-def test_planted_effect_found_and_parameter_recovered(rotor_case):
+@pytest.fixture(scope="module")
+def rotor_run(rotor_case, tmp_path_factory):
+    """The rotor case diagnosed once, through ``jflex diagnose`` (the same diagnose() call, its
+    result written as diagnosis.json): the tests below check different properties of that run."""
+    from jflex.cli import main
+
+    out = tmp_path_factory.mktemp("rotor_run") / "run"
+    assert main(["diagnose", str(rotor_case), "--out", str(out)]) == 0
+    return out
+
+
+def test_planted_effect_found_and_parameter_recovered(rotor_case, rotor_run):
     truth = _truth(rotor_case)["effects"][0]
-    r = diagnose(rotor_case).result
+    r = json.loads((rotor_run / "diagnosis.json").read_text())
     assert r["significant"]
     assert [(s["effect"], s["joint"]) for s in r["selected"]][:1] == [("rotor_inertia", truth["joint"])]
     got = r["parameters"]["torque"][f"rotor_inertia@{truth['joint']}"]["Ia [kg m^2]"]
@@ -456,12 +467,9 @@ def test_loaded_backlash_columns_are_the_link_lag_to_first_order(rotor_case):
     assert set(names) == {"compliance 1/k [rad/(N m)]", "b [rad]", "sign width [x std(tau)]"}
 
 
-def test_cli_diagnose_writes_run_folder(rotor_case, tmp_path):
-    from jflex.cli import main
-
-    assert main(["diagnose", str(rotor_case), "--out", str(tmp_path / "run")]) == 0
-    r = json.loads((tmp_path / "run" / "diagnosis.json").read_text())
-    assert r["selected"] and (tmp_path / "run" / "report.md").is_file() and (tmp_path / "run" / "waterfall.png").is_file()
+def test_cli_diagnose_writes_run_folder(rotor_run):
+    r = json.loads((rotor_run / "diagnosis.json").read_text())
+    assert r["selected"] and (rotor_run / "report.md").is_file() and (rotor_run / "waterfall.png").is_file()
 
 
 @pytest.mark.slow
