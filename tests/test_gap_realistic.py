@@ -21,6 +21,8 @@ from jflex.effects import AbstractEffect
 from jflex.gap import EffectCandidate, diagnose
 from jflex.identify import Free
 
+from conftest import SLOW
+
 pin = pytest.importorskip("pinocchio")
 
 FS = 250.0  # [Hz] log rate
@@ -176,7 +178,9 @@ def test_flexible_joint_in_torque_logs_is_found(tmp_path):
     # follows the trajectory, the link lags through the spring; the log holds quantised motor angles
     from independent import make_case
 
-    folder, truth = make_case(tmp_path / "fj", kind="torque", robot="arm3", effects=("joint_flexibility",), seed=1)
+    # 3 s records by default (the generator's small size), 5 s with JFLEX_SLOW=1
+    folder, truth = make_case(tmp_path / "fj", kind="torque", robot="arm3", effects=("joint_flexibility",), seed=1,
+                              small=not SLOW)
     planted = truth["effects"][0]
     r = diagnose(folder).result
     assert r["verdict"] == "explained"
