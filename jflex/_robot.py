@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -145,6 +146,12 @@ class Robot(eqx.Module):
         return eqx.tree_at(lambda r: [getattr(r, k) for k in names], self, [jnp.asarray(kw[k]) for k in names])
 
 
+def _on_device(x):
+    # a host array placed on the device as it is: jnp.asarray would compile a copy program per shape
+    # (jax 0.10), seven for one robot, a second of a URDF's load
+    return jax.device_put(np.asarray(x, dtype=float))
+
+
 def make_robot(
     *,
     joint_names: Sequence[str],
@@ -205,17 +212,17 @@ def make_robot(
             raise ParameterError(f"joint '{joint_names[i]}': lower limit {lo[i]} exceeds upper limit {hi[i]}")
     lead, mult, off = _coupling(list(joint_names), mimic)
     return Robot(
-        placement_R=jnp.asarray(arr(placement_R, (n, 3, 3), "placement_R")),
-        placement_p=jnp.asarray(arr(placement_p, (n, 3), "placement_p")),
-        axis=jnp.asarray(ax),
-        inertia=jnp.asarray(inertia),
-        gravity=jnp.asarray(arr(gravity, (3,), "gravity")),
-        lower=jnp.asarray(lo),
-        upper=jnp.asarray(hi),
-        velocity_limit=jnp.asarray(full(velocity_limit, np.inf, "velocity_limit")),
-        effort_limit=jnp.asarray(full(effort_limit, np.inf, "effort_limit")),
-        frame_R=jnp.asarray(fR.reshape(nf, 3, 3)),
-        frame_p=jnp.asarray(fp.reshape(nf, 3)),
+        placement_R=_on_device(arr(placement_R, (n, 3, 3), "placement_R")),
+        placement_p=_on_device(arr(placement_p, (n, 3), "placement_p")),
+        axis=_on_device(ax),
+        inertia=_on_device(inertia),
+        gravity=_on_device(arr(gravity, (3,), "gravity")),
+        lower=_on_device(lo),
+        upper=_on_device(hi),
+        velocity_limit=_on_device(full(velocity_limit, np.inf, "velocity_limit")),
+        effort_limit=_on_device(full(effort_limit, np.inf, "effort_limit")),
+        frame_R=_on_device(fR.reshape(nf, 3, 3)),
+        frame_p=_on_device(fp.reshape(nf, 3)),
         joint_names=tuple(joint_names),
         link_names=tuple(link_names),
         parents=tuple(int(p) for p in parents),

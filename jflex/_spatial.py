@@ -8,16 +8,18 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 
-def skew(a):
-    """(3,) -> (3, 3) with skew(a) @ b == cross(a, b)."""
-    z = jnp.zeros_like(a[0])
-    return jnp.array([[z, -a[2], a[1]], [a[2], z, -a[0]], [-a[1], a[0], z]])
+def skew(a, xp=jnp):
+    """(3,) -> (3, 3) with skew(a) @ b == cross(a, b). ``xp=numpy`` computes on the host (no
+    JAX program: a model being loaded)."""
+    z = xp.zeros_like(a[0])
+    return xp.array([[z, -a[2], a[1]], [a[2], z, -a[0]], [-a[1], a[0], z]])
 
 
-def rot_axis_angle(axis, angle):
-    """Rotation matrix about a unit ``axis`` (3,) by ``angle`` [rad] (Rodrigues)."""
-    K = skew(axis)
-    return jnp.eye(3) + jnp.sin(angle) * K + (1.0 - jnp.cos(angle)) * (K @ K)
+def rot_axis_angle(axis, angle, xp=jnp):
+    """Rotation matrix about a unit ``axis`` (3,) by ``angle`` [rad] (Rodrigues); ``xp`` as in
+    :func:`skew`."""
+    K = skew(axis, xp)
+    return xp.eye(3) + xp.sin(angle) * K + (1.0 - xp.cos(angle)) * (K @ K)
 
 
 def rot_x(a):

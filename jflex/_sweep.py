@@ -521,9 +521,10 @@ def sweep(
             else:
                 pad = chunk - (stop - start)
 
-                xp = np if multi else jnp  # several processes: each passes the same host values
-
                 def take(a):
+                    # several processes pass the same host values; a host array is cut on the host
+                    # (jnp's slicing and padding are programs of their own, compiled per shape)
+                    xp = np if multi or not isinstance(a, jax.Array) else jnp
                     a = xp.asarray(a[start:stop])
                     if pad:  # repeat the last item so every chunk has one compiled shape
                         a = xp.concatenate([a, xp.repeat(a[-1:], pad, axis=0)])

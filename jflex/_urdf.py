@@ -419,7 +419,7 @@ def _from_element(root, fname, gravity, lock=None, joints=None, mimic="coupled",
                 if jtype == "prismatic":
                     T_motion[:3, 3] = axis * v
                 else:
-                    T_motion[:3, :3] = np.asarray(rot_axis_angle(axis, v))
+                    T_motion[:3, :3] = rot_axis_angle(np.asarray(axis, float), float(v), np)
                 T_body_joint = T_body_joint @ T_motion
             frame_names.append(child)
             frame_parents.append(body)

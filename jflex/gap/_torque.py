@@ -81,7 +81,7 @@ def on_rows(fn, static: tuple, arrays) -> object:
     M = max(-(-N // ROW_BUCKET) * ROW_BUCKET, ROW_BUCKET)
     if M > N:
         arrays = [np.concatenate([a, np.repeat(a[-1:], M - N, axis=0)]) for a in arrays]
-    out = fn(*static, *(jnp.asarray(a) for a in arrays))
+    out = fn(*static, *(jax.device_put(a) for a in arrays))  # (jnp.asarray compiles a copy per shape)
     return jax.tree.map(lambda o: np.asarray(o)[:N], out)
 
 
