@@ -121,7 +121,8 @@ class Regressor(eqx.Module):
         # all blocks dispatched before any is waited for: they run while Python dispatches
         parts = [_block(self, robot, q[i : i + _BLOCK], qd[i : i + _BLOCK], qdd[i : i + _BLOCK])
                  for i in range(0, q.shape[0], _BLOCK)]
-        return jnp.asarray(np.concatenate([np.asarray(x) for x in parts])[: N * robot.nq])
+        # device_put: jnp.asarray compiles a copy program per shape (jax 0.10)
+        return jax.device_put(np.concatenate([np.asarray(x) for x in parts])[: N * robot.nq])
 
 
 _BLOCK = 512  # samples per compiled regressor block
