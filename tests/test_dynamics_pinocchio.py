@@ -105,8 +105,9 @@ def test_random_dh_robots_match_pinocchio(seed, n, standard):
 def test_batched_kernels_match_pinocchio(fuse):
     # the batch path the benchmarks time: blocks (fuse=True) or one unfused program (fuse=False,
     # where XLA:CPU once miscompiled lax.map blocks and RNEA/ABA came out wrong by O(1)); the
-    # benchmarks' Panda at full size (JFLEX_SLOW=1), else a random 4-joint DH arm (the Panda's
-    # six batched programs compile for minutes on 2 cores, a UR5's for over one)
+    # benchmarks' Panda at full size (JFLEX_SLOW=1), else a random 3-joint DH arm with a prismatic
+    # joint (the Panda's six batched programs compile for minutes on 2 cores, a UR5's for over one;
+    # the unfused programs' compile grows with the unrolled traversal, one joint less is a quarter less)
     if os.environ.get("JFLEX_SLOW") == "1":
         if "panda" not in jflex.available_robots():
             pytest.skip("example-robot-data not installed")
@@ -117,9 +118,9 @@ def test_batched_kernels_match_pinocchio(fuse):
         model = pin.buildModelFromUrdf(path)
     else:
         g = np.random.default_rng(7)
-        table = np.column_stack([g.uniform(-np.pi, np.pi, 4), g.uniform(-1, 1, 4), g.uniform(-1, 1, 4), g.uniform(-np.pi, np.pi, 4)])
-        robot = jflex.from_dh(table, joint_types=["revolute", "prismatic", "revolute", "revolute"],
-                              inertias=[random_inertia_params(g) for _ in range(4)], gravity=[0.0, 0.0, -9.81])
+        table = np.column_stack([g.uniform(-np.pi, np.pi, 3), g.uniform(-1, 1, 3), g.uniform(-1, 1, 3), g.uniform(-np.pi, np.pi, 3)])
+        robot = jflex.from_dh(table, joint_types=["revolute", "prismatic", "revolute"],
+                              inertias=[random_inertia_params(g) for _ in range(3)], gravity=[0.0, 0.0, -9.81])
         model = pin_model_from_robot(robot)
     data = model.createData()
     rng = np.random.default_rng(3)
