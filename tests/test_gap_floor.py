@@ -211,3 +211,34 @@ def test_an_effect_confined_to_one_joint_is_named_on_that_joints_evidence():
     assert sel.steps[0].step_shrink < MIN_NAMED_SHRINK
     # without the joint it resolves, a candidate as small in the pool is not named
     assert run(["noise"]).steps == []
+
+
+def test_a_channel_no_model_predicts_is_flagged_and_named_when_far_above_its_neighbours():
+    # joint 3's residual rings at 3.1 Hz with a phase of its own (no function of the motion):
+    # its black-box bound is its own residual, flagged; the diagnosis names it when its gap is far
+    # above the noise the other joints show, and only then
+    from jflex.gap._diagnose import _unpredicted
+
+    # a motion that does not repeat (two incommensurate periods): over one period alone, time, and
+    # so any ringing, is a function of the motion
+    t, q, qd, qdd, tau = _motion(3.0, 1, seed=5)
+    _, q2, qd2, qdd2, _ = _motion(2.3, 1.3, seed=6)
+    k = min(len(t), len(q2))
+    t, q, qd, qdd = t[:k], q[:k] + 0.3 * q2[:k], qd[:k] + 0.3 * qd2[:k], qdd[:k] + 0.3 * qdd2[:k]
+    model, _, _ = R.true_model("arm3")
+    F0 = TQ.rnea_batch(model, q, qd, qdd)
+    rng = np.random.default_rng(11)
+    true = 0.01 * F0.std(axis=0)
+    resid = rng.standard_normal(F0.shape) * true + 0.05 * F0.std(axis=0) * np.tanh(qd / 0.02)
+    resid[:, 2] += 0.2 * F0.std(axis=0)[2] * np.sin(2 * np.pi * 3.1 * t + 1.3)
+    s = types.SimpleNamespace(t=t, q=q, qd=qd, qdd=qdd, F0=F0)
+    sig, _, info = black_box_noise(s, resid, np.ones(3, bool))
+    assert 2 in info["unpredicted"] and 0 not in info["unpredicted"] and 1 not in info["unpredicted"]
+    names = ["j1", "j2", "j3"]
+    det = {"v": {"unpredicted": [names[j] for j in info["unpredicted"]],
+                 "channels": {c: float(sig[j] / F0.std(axis=0)[j] * 100) for j, c in enumerate(names)}}}
+    gaps = {c: float(np.sqrt(np.mean(resid[:, j] ** 2)) / F0.std(axis=0)[j] * 100) for j, c in enumerate(names)}
+    assert _unpredicted({"v": {"channels": gaps}}, det) == [("v", "j3", pytest.approx(gaps["j3"]))]
+    # the same channel at the others' noise level is not named
+    gaps["j3"] = det["v"]["channels"]["j1"]
+    assert _unpredicted({"v": {"channels": gaps}}, det) == []

@@ -33,7 +33,7 @@ from ._inertia import inertia_prior, link_moves
 from ._response import cad_spread as cad_spread_response
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
-from ._selection import (MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWAP_SHRINK, forward_select, gap_summary,
+from ._selection import (MIN_GAP, MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWAP_SHRINK, forward_select, gap_summary,
                          ic_delta, decisive, swap_rivals, is_significant, joints_beyond_floor, pooled_upper, rank_entries, step_record, stop_reason, verdict, vetoed,
                          worse_channels)
 from ._frequency_kinds import frequency_kinds
@@ -49,6 +49,26 @@ class Diagnosis:
     nominal: State
     final: State
     steps: list
+
+
+UNPREDICTED_FACTOR = 3.0  # x the other joints' median floor: a gap no noise level of theirs explains
+
+
+def _unpredicted(ev, details) -> list:
+    """``(set, channel, gap %)`` of the channels whose black-box floor predicted none of their
+    residual while their gap is over UNPREDICTED_FACTOR x the median floor of the set's other
+    channels (relative to their own torque: a noise level the sensors share)."""
+    out = []
+    for k, d in details.items():
+        bad = set(d.get("unpredicted", ()))
+        others = [v for c, v in (d.get("channels") or {}).items() if c not in bad]
+        if not bad or not others:
+            continue
+        for c in sorted(bad):
+            g = ev.get(k, {}).get("channels", {}).get(c)
+            if g is not None and g > UNPREDICTED_FACTOR * float(np.median(others)) + MIN_GAP:
+                out.append((k, c, float(g)))
+    return out
 
 
 def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None, channel_floor=None, state=None):
@@ -286,6 +306,13 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         reason = ("the noise floor could not be estimated (" + "; ".join(f"{k}: {v}" for k, v in failed_floor.items()) +
                   "): the gap is reported against no floor, and whether it exceeds the noise is unknown"
                   + (f"; {reason}" if reason else ""))
+    hidden = _unpredicted(ev0, floor_details)
+    if hidden and verdict_ in ("within_noise", "explained"):
+        # a channel's floor that is its own residual cannot clear it: say so rather than let the
+        # pooled verdict speak for that joint
+        reason = ((f"{reason}; " if reason else "") + "the floors of " + ", ".join(
+            f"{c} in {k} (gap {g:.2f} %)" for k, c, g in hidden) + " are their own residual: no function of the "
+            "motion predicted any of it, so whether those joints' gaps are noise is unknown")
     wh = where(pb, ev0, floor, case, channel_floor=cfloor)
     moves, inertia_note = _inertia_report(pb, nom)
     result = dict(

@@ -82,7 +82,7 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
                                  f"{', linear drift cancelled' if info['drift_cancelled'] else ''})")
                 else:
                     sig, dof, info = black_box_noise(s, r["resid"] * s.scale, m)
-                    for k in ("base_only", "angle_series"):
+                    for k in ("base_only", "angle_series", "unpredicted"):
                         info[k] = [problem.names[j] for j in info[k]]
                     src[name] = "black-box split-half cross-validation (upper bound)"
             out[name], info = _pooled(sig, dof, s.scale, m, problem.names, info)
@@ -240,6 +240,7 @@ BLACK_BOX_FEATURES = 200  # random Fourier features of the motion, at most
 # (a series too long for the data chases the held-out blocks' edges, one too short misses a fast
 # ripple; the data say which, as for the other models, on held-out blocks)
 BLACK_BOX_HARMONICS = (8, 16, 32)
+UNPREDICTED = 0.95  # a channel whose held-out bound keeps this share of its own residual's RMS
 
 
 RIDGE_GRID = np.geomspace(1e-8, 1.0, 17)  # penalties, relative to the largest eigenvalue of the Gram
@@ -388,7 +389,12 @@ def black_box_noise(s, resid, m, seed: int = 0):
     sig = rms[pick, np.arange(n)]
     dof = np.array([effective_samples(err[:, j]) if m[j] else 1.0 for j in range(n)])
     mk = np.asarray(m, bool)
+    # a channel no model predicted any of: its bound is its own residual, noise or an error that is
+    # no function of the motion (the floor cannot tell which)
+    own = np.sqrt(np.mean((resid - resid.mean(axis=0)) ** 2, axis=0))
+    unpredicted = [int(j) for j in np.flatnonzero(mk & (sig >= UNPREDICTED * own) & (own > 0))]
     return sig, dof, dict(features=int(Phi.shape[1]), base_features=int(nb), blocks=BLACK_BOX_BLOCKS,
+                          unpredicted=unpredicted,
                           harmonics=Ks, base_only=[int(j) for j in np.flatnonzero((pick == 1) & mk)],
                           angle_series=[int(j) for j in np.flatnonzero((pick >= 2) & mk)])
 
