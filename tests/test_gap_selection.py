@@ -187,16 +187,17 @@ def _table_problem(left):
     return ev, refit
 
 
-@pytest.mark.parametrize("shape_left, swapped", [(0.0, True), (0.28, False)])
-def test_a_rival_that_closes_what_the_selected_effect_left_takes_its_place(shape_left, swapped):
+@pytest.mark.parametrize("shape_left, swapped, both_left", [(0.0, True, 0.3), (0.28, False, 0.3), (0.0, False, 0.0)])
+def test_a_rival_that_closes_what_the_selected_effect_left_takes_its_place(shape_left, swapped, both_left):
     # alone, an offset closes a little more than the spring that is really there (its constant
     # part); beside the rotor inertia also selected, the spring closes what the offset leaves (its
-    # shape): it takes the offset's place, unless the gain is below MIN_STEP_SHRINK of the excess
+    # shape): it takes the offset's place, unless the gain is below MIN_STEP_SHRINK of the excess,
+    # or no excess is left to close (both leave none: the selection stands)
     from jflex.gap._selection import MIN_STEP_SHRINK, swap_rivals
 
     F = frozenset
     left = {F(): 40.0, F({"offset"}): 13.0, F({"spring"}): 13.5, F({"rotor"}): 30.0,
-            F({"offset", "rotor"}): 0.3, F({"spring", "rotor"}): shape_left, F({"offset", "spring"}): 12.0,
+            F({"offset", "rotor"}): both_left, F({"spring", "rotor"}): shape_left, F({"offset", "spring"}): 12.0,
             F({"offset", "spring", "rotor"}): 0.0}
     ev, refit = _table_problem(left)
     sel = forward_select((), ev(()), FLOOR, ["offset", "spring", "rotor"], refit, n_params=lambda c: 1,
@@ -212,5 +213,5 @@ def test_a_rival_that_closes_what_the_selected_effect_left_takes_its_place(shape
         assert new.steps[1].state_before == ("spring",)
         assert new.steps[0].step_shrink == pytest.approx(100 * (1 - np.sqrt(13.5) / np.sqrt(40.0)))
     else:
-        assert 100 * (1 - np.sqrt(shape_left) / exc_before) < MIN_STEP_SHRINK
+        assert exc_before == 0 or 100 * (1 - np.sqrt(shape_left) / exc_before) < MIN_STEP_SHRINK
         assert new is sel and swaps == []

@@ -260,7 +260,9 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         # a rival that alone closed nearly as much may hold the data's shape beside the other
         # effects (rebuilt with plain refits: a spring identified through the simulation is not)
         def rivals(c):
+            # (a nested pair was already judged by the parsimony rule)
             return [k for k in keep if k != c and k.joint == c.joint and k.effect != c.effect
+                    and NESTED.get(k.effect) != c.effect and NESTED.get(c.effect) != k.effect
                     and k.effect != "joint_flexibility" and not pb.screened_by_simulation(nom, k)
                     and abs(alone.get(k, -1e9) - alone.get(c, 1e9)) < SWAP_SHRINK][:2]
 

@@ -364,6 +364,8 @@ def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_para
     for i in range(len(sel.steps)):
         cands = [st.cand for st in sel.steps]
         _, _, exc_cur = gap_summary(sel.ev, floor)
+        if exc_cur <= 0:  # nothing left to close: the selection stands
+            break
         best = None
         for alt in rivals(cands[i]):
             if alt in cands:
@@ -382,7 +384,7 @@ def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_para
             if not ok or worse_channels(ev, sel.ev, channel_floor):
                 continue
             _, _, exc = gap_summary(ev, floor)
-            if exc <= (1 - MIN_STEP_SHRINK / 100) * exc_cur and (best is None or exc < best[0]):
+            if exc < (1 - MIN_STEP_SHRINK / 100) * exc_cur and (best is None or exc < best[0]):
                 best = (exc, alt, chain)
         if best is not None:
             swaps.append((cands[i], best[1], exc_cur, best[0]))
