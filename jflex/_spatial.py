@@ -48,9 +48,10 @@ def homogeneous(R, p):
     return jnp.concatenate([top, jnp.array([[0.0, 0.0, 0.0, 1.0]], dtype=top.dtype)], axis=0)
 
 
-def inertia_matrix3(pi):
-    """Rotational inertia about the frame origin from the 10 parameters (Pinocchio order)."""
-    return jnp.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
+def inertia_matrix3(pi, xp=jnp):
+    """Rotational inertia about the frame origin from the 10 parameters (Pinocchio order); ``xp``
+    as in :func:`skew`."""
+    return xp.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
 
 
 def params_from_com(mass, com, inertia_com):

@@ -46,17 +46,12 @@ def log_cholesky_to_inertia(theta):
     return pseudo_inertia_to_params(log_cholesky_pseudo_inertia(theta))
 
 
-def _inertia_matrix3_np(pi):
-    # inertia_matrix3 on the host: a fit's start and its checks run no JAX program
-    return np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]], dtype=float)
-
-
 def inertia_to_log_cholesky(pi, eps: float = 1e-9):
     """Inverse map; a body on (or beyond) the boundary of consistency is first nudged inside by
     adding ``eps`` (relative) to its pseudo-inertia's eigenvalues."""
     pi = np.asarray(pi, dtype=float)
     m, h = pi[0], pi[1:4]
-    I = _inertia_matrix3_np(pi)
+    I = inertia_matrix3(pi, np)  # on the host: a fit's start and checks run no JAX program
     S = 0.5 * np.trace(I) * np.eye(3) - I
     J = np.block([[S, h[:, None]], [h[None, :], np.array([[m]])]])
     w, V = np.linalg.eigh(J)
@@ -75,7 +70,7 @@ def inertia_to_log_cholesky(pi, eps: float = 1e-9):
 def is_consistent(pi, tol: float = 1e-9) -> bool:
     """Whether 10 inertial parameters describe a physical body (pseudo-inertia PSD)."""
     pi = np.asarray(pi, dtype=float)
-    I = _inertia_matrix3_np(pi)
+    I = inertia_matrix3(pi, np)
     S = 0.5 * np.trace(I) * np.eye(3) - I
     J = np.block([[S, pi[1:4, None]], [pi[None, 1:4], np.array([[pi[0]]])]])
     w = np.linalg.eigvalsh(J)
