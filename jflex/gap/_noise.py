@@ -253,12 +253,13 @@ class _Moments:
     however many models, folds and penalties are tried."""
 
     def __init__(self, A, Y, ids, nblk):
-        self.n = np.array([np.sum(ids == b) for b in range(nblk)], float)
-        self.sA = np.stack([A[ids == b].sum(axis=0) for b in range(nblk)])
-        self.sY = np.stack([Y[ids == b].sum(axis=0) for b in range(nblk)])
-        self.G = np.stack([A[ids == b].T @ A[ids == b] for b in range(nblk)])
-        self.C = np.stack([A[ids == b].T @ Y[ids == b] for b in range(nblk)])
-        self.yy = np.stack([np.sum(Y[ids == b] ** 2, axis=0) for b in range(nblk)])
+        sums = []
+        for b in range(nblk):  # one block's rows at a time: never a second copy of A
+            a, y = A[ids == b], Y[ids == b]
+            sums.append((len(a), a.sum(axis=0), y.sum(axis=0), a.T @ a, a.T @ y, np.sum(y**2, axis=0)))
+        n, sA, sY, G, C, yy = zip(*sums)
+        self.n, self.sA, self.sY = np.array(n, float), np.stack(sA), np.stack(sY)
+        self.G, self.C, self.yy = np.stack(G), np.stack(C), np.stack(yy)
 
     def centred(self, blocks, cols, mp, mr):
         """Gram, cross and target sums of the blocks ``blocks`` on the columns ``cols``, centred at
