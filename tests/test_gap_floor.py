@@ -34,6 +34,17 @@ def _motion(T, periods, seed=0):
     return t, q, qd, qdd, TQ.rnea_batch(model, q, qd, qdd)
 
 
+def _non_repeating_motion():
+    """A 3 s record that does not repeat (two incommensurate Fourier excitations, 3 s and 2.3 s,
+    summed): t, q, qd, qdd and the true arm's torques F0 (Pinocchio)."""
+    t, q, qd, qdd, _ = _motion(3.0, 1, seed=5)
+    _, q2, qd2, qdd2, _ = _motion(2.3, 1.3, seed=6)
+    k = min(len(t), len(q2))
+    t, q, qd, qdd = t[:k], q[:k] + 0.3 * q2[:k], qd[:k] + 0.3 * qd2[:k], qdd[:k] + 0.3 * qdd2[:k]
+    model, _, _ = R.true_model("arm3")
+    return t, q, qd, qdd, TQ.rnea_batch(model, q, qd, qdd)
+
+
 @pytest.mark.parametrize("coloured", [False, True])
 def test_periodic_floor_is_the_added_noise_within_20_percent(coloured):
     t, q, qd, qdd, tau = _motion(2.0, 5)
@@ -92,14 +103,9 @@ def test_a_smooth_motion_sampled_fast_has_no_period():
 
 
 def test_black_box_floor_does_not_count_structured_error_as_noise():
-    # a record that does not repeat (two incommensurate periods); its nominal residual holds
+    # a record that does not repeat; its nominal residual holds
     # Coulomb and viscous friction and a sensor delay (functions of the motion) plus coloured noise
-    t, q, qd, qdd, tau = _motion(3.0, 1, seed=5)
-    _, q2, qd2, qdd2, tau2 = _motion(2.3, 1.3, seed=6)
-    k = min(len(t), len(q2))
-    t, q, qd, qdd, tau = t[:k], q[:k] + 0.3 * q2[:k], qd[:k] + 0.3 * qd2[:k], qdd[:k] + 0.3 * qdd2[:k], tau[:k]
-    model, _, _ = R.true_model("arm3")
-    F0 = TQ.rnea_batch(model, q, qd, qdd)
+    t, q, qd, qdd, F0 = _non_repeating_motion()
     rng = np.random.default_rng(7)
     std = 0.01 * F0.std(axis=0)
     noise = S.ar1_noise(rng, F0.shape, 0.7, std)
@@ -118,12 +124,7 @@ def test_black_box_floor_does_not_count_a_ripple_in_one_angle_as_noise():
     # cogging: a torque ripple of 27 cycles a turn of joint 1, 5 x the noise, out of every model
     # of the library; it is a function of the motion, so the floor must not hold it (it did, at
     # 5.5 x the noise, when the black box was smooth in the angles only)
-    t, q, qd, qdd, tau = _motion(3.0, 1, seed=5)
-    _, q2, qd2, qdd2, _ = _motion(2.3, 1.3, seed=6)
-    k = min(len(t), len(q2))
-    t, q, qd, qdd = t[:k], q[:k] + 0.3 * q2[:k], qd[:k] + 0.3 * qd2[:k], qdd[:k] + 0.3 * qdd2[:k]
-    model, _, _ = R.true_model("arm3")
-    F0 = TQ.rnea_batch(model, q, qd, qdd)
+    t, q, qd, qdd, F0 = _non_repeating_motion()
     rng = np.random.default_rng(9)
     true = 0.01 * F0.std(axis=0)
     noise = S.ar1_noise(rng, F0.shape, 0.7, true)
@@ -219,14 +220,8 @@ def test_a_channel_no_model_predicts_is_flagged_and_named_when_far_above_its_nei
     # above the noise the other joints show, and only then
     from jflex.gap._diagnose import _unpredicted
 
-    # a motion that does not repeat (two incommensurate periods): over one period alone, time, and
-    # so any ringing, is a function of the motion
-    t, q, qd, qdd, tau = _motion(3.0, 1, seed=5)
-    _, q2, qd2, qdd2, _ = _motion(2.3, 1.3, seed=6)
-    k = min(len(t), len(q2))
-    t, q, qd, qdd = t[:k], q[:k] + 0.3 * q2[:k], qd[:k] + 0.3 * qd2[:k], qdd[:k] + 0.3 * qdd2[:k]
-    model, _, _ = R.true_model("arm3")
-    F0 = TQ.rnea_batch(model, q, qd, qdd)
+    # (over one period alone, time, and so any ringing, is a function of the motion)
+    t, q, qd, qdd, F0 = _non_repeating_motion()
     rng = np.random.default_rng(11)
     true = 0.01 * F0.std(axis=0)
     resid = rng.standard_normal(F0.shape) * true + 0.05 * F0.std(axis=0) * np.tanh(qd / 0.02)
