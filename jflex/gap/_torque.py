@@ -293,35 +293,31 @@ class TorqueFit:
     cov_delta: np.ndarray | None = None  # (10 n, 10 n) covariance of delta (bounds inactive)
 
 
+def _product(s: TorqueSet, key, make):
+    """``s.cache[key]``, made by ``make()`` the first time."""
+    if key not in s.cache:
+        s.cache[key] = make()
+    return s.cache[key]
+
+
 def term_columns(term: "TorqueTerm", s: TorqueSet) -> np.ndarray:
     """(N, n, k) columns of ``term`` on ``s``, through the set's parallel filter (cached)."""
-    key = ("cols", term)
-    if key not in s.cache:
-        s.cache[key] = s.lp(term.columns(s))
-    return s.cache[key]
+    return _product(s, ("cols", term), lambda: s.lp(term.columns(s)))
 
 
 def _filtered(s: TorqueSet, name: str):
-    key = ("lp", name)
-    if key not in s.cache:
-        X = getattr(s, name)
-        s.cache[key] = s.lp(X.reshape(X.shape[0], -1)).reshape(X.shape)
-    return s.cache[key]
+    X = getattr(s, name)
+    return _product(s, ("lp", name), lambda: s.lp(X.reshape(X.shape[0], -1)).reshape(X.shape))
 
 
 def weighted_inertia_columns(s: TorqueSet):
     """``(Yw, Yw'Yw)``: the set's inertial columns through its parallel filter, rows normalised by
     its torque scale, as every fit sees them (cached)."""
-    if "Yw" not in s.cache:
+    def make():
         Yw = (_filtered(s, "Y") * (1.0 / s.scale)[None, :, None]).reshape(s.tau.size, -1)
-        s.cache["Yw"] = (Yw, Yw.T @ Yw)
-    return s.cache["Yw"]
+        return Yw, Yw.T @ Yw
 
-
-def _product(s: TorqueSet, key, make):
-    if key not in s.cache:
-        s.cache[key] = make()
-    return s.cache[key]
+    return _product(s, "Yw", make)
 
 
 def _gram(terms, delay, s: TorqueSet, inertia):
