@@ -1,5 +1,5 @@
 """Batch evaluation of a per-item function over a large batch: chunked (bounded memory), sharded
-across ``jax.devices()``, with progress and per-chunk files so an interrupted sweep keeps what it
+across the devices (on CPU, one per process), with progress and per-chunk files so an interrupted sweep keeps what it
 has already computed and resumes where it stopped.
 
 Several hosts: start the same script on every host after
@@ -95,7 +95,9 @@ def batched(fn: Callable, *, program: str | None = None, batch_size: int | None 
     divide is padded with its last item, and the padding dropped). XLA:CPU runs one such program
     on one core; to use several cores, start Python with
     ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` (before JAX is imported) and
-    pass ``jax.devices()``.
+    pass ``jax.devices()``. Keep ``fn`` free of LAPACK-backed calls there (Cholesky, solves,
+    eigenvalues): with several CPU devices in one process, jaxlib 0.10's batched LAPACK kernels
+    can wait forever on a thread pool the other device's kernel holds.
 
     The library's run-time checks inside ``fn`` (NaN/inf arguments, a singular mass matrix) are
     compiled as output flags, not as callbacks into Python: after each call the host raises the
@@ -424,6 +426,18 @@ def _constant_program(fn):
         return prog
 
 
+def _default_devices():
+    """``jax.devices()`` with one CPU device per process (see ``sweep``'s ``devices``)."""
+    out, seen = [], set()
+    for d in jax.devices():
+        if d.platform == "cpu":
+            if d.process_index in seen:
+                continue
+            seen.add(d.process_index)
+        out.append(d)
+    return out
+
+
 def sweep(
     fn: Callable,
     *args,
@@ -454,7 +468,12 @@ def sweep(
       pytrees it closes over, e.g. a robot), the chunk size and ``key``; a folder written by a
       different sweep, or a damaged chunk, raises :class:`jflex.DataError` naming the file, and
       nothing in it is reused (clear the folder or pass another ``out_dir``).
-    - ``devices``: devices to shard each chunk over (default ``jax.devices()``).
+    - ``devices``: devices to shard each chunk over. Default: every device of ``jax.devices()``,
+      except that on CPU each process contributes one device: one XLA:CPU device already runs a
+      chunk on every core, and with several CPU devices in one process jaxlib 0.10's batched
+      LAPACK kernels (Cholesky, triangular solves, eigenvalues) can wait forever on a thread
+      pool the other device's kernel holds (seen with ``forward_dynamics(method="crba")`` on 2
+      cores). Pass ``jax.devices()`` to split over them anyway.
     - ``key``: anything whose ``repr`` tells this sweep apart when the fingerprint cannot see a
       change (a model read from a file inside ``fn``, an object attribute it reads).
 
@@ -489,7 +508,7 @@ def sweep(
         items = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(np.shape(a)[1:], np.result_type(a)), args)
         shapes = jax.eval_shape(fn, *items)
         return jax.tree_util.tree_map(lambda s: np.zeros((0, *s.shape), s.dtype), shapes)
-    devices = list(devices) if devices is not None else jax.devices()
+    devices = list(devices) if devices is not None else _default_devices()
     nd = len(devices)
     chunk = min(chunk_size, N)
     chunk = int(math.ceil(chunk / nd) * nd)  # every device gets the same share

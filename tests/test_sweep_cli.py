@@ -24,7 +24,7 @@ def test_sweep_shards_over_four_host_devices(tmp_path):
         q = np.random.default_rng(0).normal(size=(1003, 3))
         seen = []
         out = jflex.sweep(lambda x: jflex.crba(r, x), q, chunk_size=200, out_dir=r"{tmp_path}",
-                          on_chunk=lambda a, b, o: seen.append((a, b)), progress=False)
+                          on_chunk=lambda a, b, o: seen.append((a, b)), progress=False, devices=jax.devices())
         ref = np.stack([np.asarray(jflex.crba(r, x)) for x in q[:50]])
         assert out.shape == (1003, 3, 3)
         assert np.abs(out[:50] - ref).max() < 1e-12
@@ -55,6 +55,33 @@ def test_batched_splits_over_two_host_devices():
             out = jflex.batched(f, batch_size=128, fuse=fuse, devices=jax.devices())(q, v, t)
             assert out.shape == ref.shape and len(out.sharding.device_set) == 2, out.sharding
             assert np.abs(np.asarray(out) - ref).max() < 1e-9 * np.abs(ref).max()
+        print("OK")
+        """
+    )
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_sweep_uses_one_cpu_device_per_process_by_default():
+    """With two CPU devices in one process, a sweep over a Cholesky solve (jaxlib's batched
+    LAPACK kernels, which could deadlock split over both) runs on one device by default and
+    finishes with the plain results."""
+    code = textwrap.dedent(
+        """
+        import jax, numpy as np, jflex
+        from jflex._sweep import _default_devices
+        assert len(jax.devices()) == 2, jax.devices()
+        assert _default_devices() == jax.devices()[:1], _default_devices()
+        r = jflex.load_robot("staubli_tx200")
+        r = r.replace(inertia=np.tile([5.0, 0.5, 0.1, 0.2, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0], (3, 1)))
+        rng = np.random.default_rng(0)
+        q, v, t = (rng.normal(size=(4000, r.nq)) for _ in range(3))
+        f = lambda q, v, t: jflex.forward_dynamics(r, q, v, t, method="crba")
+        ref = np.asarray(jax.jit(jax.vmap(f))(q, v, t))
+        for _ in range(8):
+            out = jflex.sweep(f, q, v, t, chunk_size=4000, progress=False)
+        assert np.abs(out - ref).max() < 1e-9 * np.abs(ref).max()
         print("OK")
         """
     )
