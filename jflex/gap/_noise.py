@@ -82,7 +82,7 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
                                  f"{', linear drift cancelled' if info['drift_cancelled'] else ''})")
                 else:
                     sig, dof, info = black_box_noise(s, r["resid"] * s.scale, m)
-                    for k in ("base_only", "angle_series", "unpredicted"):
+                    for k in ("base_only", "angle_series", "rigid_body", "unpredicted"):
                         info[k] = [problem.names[j] for j in info[k]]
                     src[name] = "black-box split-half cross-validation (upper bound)"
             out[name], info = _pooled(sig, dof, s.scale, m, problem.names, info)
@@ -315,10 +315,13 @@ def black_box_noise(s, resid, m, seed: int = 0):
     is a function of the motion and is predicted, noise is not. The same fit on the per-joint
     terms alone (no random features, a penalty of their own) is a second bound, and the per-joint
     terms with a cosine series in each joint's angle over its range (a ripple that repeats with
-    the angle: cogging, a transmission error) a third; each channel takes the smallest. An upper
-    bound of the noise (what the models cannot represent stays in it).
+    the angle: cogging, a transmission error) a third; when ``s`` carries the rigid-body regressor
+    ``Y`` (N, n, 10 n), the per-joint terms with each channel's own row of it (an inertial error is
+    linear in it) a fourth; each channel takes the smallest. An upper bound of the noise (what the
+    models cannot represent stays in it).
     Returns ``(sigma, dof, info)``; ``info["base_only"]``: the channels whose bound came from the
-    per-joint terms, ``info["angle_series"]``: those whose bound came from the angle series."""
+    per-joint terms, ``info["angle_series"]``: those whose bound came from the angle series,
+    ``info["rigid_body"]``: those whose bound came from the regressor rows."""
     N, n = resid.shape
     q, qd, qdd = (np.asarray(v, float) for v in (s.q, s.qd, s.qdd))
     h = float(np.mean(np.diff(s.t)))
@@ -366,17 +369,17 @@ def black_box_noise(s, resid, m, seed: int = 0):
         sel = (np.arange(len(mv))[:, None] * Kmax + np.arange(K)[None, :]).ravel()
         models.append(np.concatenate([base_cols, nrff + sel]))
 
-    def held_out(cols):
-        err = np.zeros_like(resid)
+    def held_out(cols, mom=mom, A=A, target=resid):
+        err = np.zeros_like(target)
         P = A[:, cols]
         for f in (0, 1):
             trb = np.arange(f, nbk, 2)
             tr, te = ids % 2 == f, ids % 2 != f
             # the intercept is not penalised: a constant share of the residual (a sensor offset, a
             # weight the sensor does not report) is a model error, never noise, however large it is
-            mr, mp = resid[tr].mean(axis=0), P[tr].mean(axis=0)
+            mr, mp = target[tr].mean(axis=0), P[tr].mean(axis=0)
             B = _ridge_blocks(mom, trb, cols, mp, mr)
-            err[te] = resid[te] - mr - (P[te] - mp) @ B
+            err[te] = target[te] - mr - (P[te] - mp) @ B
         return err
 
     # the random features' penalty shrinks the base terms with them: a light joint's viscous
@@ -384,7 +387,25 @@ def black_box_noise(s, resid, m, seed: int = 0):
     # the noise. Every model's held-out error bounds the noise from above: each channel takes the
     # tightest
     errs = [held_out(c) for c in models]
+    Y = getattr(s, "Y", None)
+    if Y is not None and nb + Y.shape[2] <= N // 8:
+        # the per-joint terms with the channel's own rigid-body regressor row: an inertial error
+        # (CAD masses, a payload) is linear in it, but through sums of angles and products of
+        # rates the smooth features above reach only roughly (a UR5 shoulder's bound stayed at
+        # 4 x its noise with a 7 % mass error)
+        Yf = s.lp(Y.reshape(N, -1)).reshape(Y.shape) if hasattr(s, "lp") else Y
+        err = np.zeros_like(resid)
+        for j in np.flatnonzero(np.asarray(m, bool)):
+            Aj = np.concatenate([Phi[:, :nb], Yf[:, j, :]], axis=1)
+            sd = Aj.std(axis=0)
+            Aj = np.where(sd > 0, (Aj - Aj.mean(axis=0)) / np.where(sd > 0, sd, 1.0), 0.0)
+            cols = np.flatnonzero(sd > 0)
+            mj = _Moments(Aj, resid[:, j:j + 1], ids, nbk)
+            err[:, j] = held_out(cols, mj, Aj, resid[:, j:j + 1])[:, 0]
+        errs.append(err)
     rms = np.stack([np.sqrt(np.mean(e**2, axis=0)) for e in errs])
+    if len(errs) > len(models):  # channels left out of the gap hold no regressor model's error
+        rms[-1, ~np.asarray(m, bool)] = np.inf
     pick = np.argmin(rms, axis=0)
     err = np.stack([errs[pick[j]][:, j] for j in range(n)], axis=1)
     sig = rms[pick, np.arange(n)]
@@ -397,7 +418,8 @@ def black_box_noise(s, resid, m, seed: int = 0):
     return sig, dof, dict(features=int(Phi.shape[1]), base_features=int(nb), blocks=BLACK_BOX_BLOCKS,
                           unpredicted=unpredicted,
                           harmonics=Ks, base_only=[int(j) for j in np.flatnonzero((pick == 1) & mk)],
-                          angle_series=[int(j) for j in np.flatnonzero((pick >= 2) & mk)])
+                          angle_series=[int(j) for j in np.flatnonzero((pick >= 2) & (pick < len(models)) & mk)],
+                          rigid_body=[int(j) for j in np.flatnonzero((pick == len(models)) & mk)])
 
 
 def frf_floor(a: dict, err) -> tuple[float, str]:
