@@ -105,13 +105,13 @@ def score(res: dict, truth: dict) -> dict:
         row["top1_joint"] = bool(first and any(first["effect"] == t["effect"] and where_ok(first, t) for t in lib))
         row["all_found"] = all(any(s["effect"] == t["effect"] and where_ok(s, t) for s in sel) for t in lib)
         # a planted effect whose torques lie exactly in the span of the links' inertial parameters
-        # (a rotor on a base joint about the vertical is its link's Izz): no torque data can tell
-        # it from the inertial refit; the honest answer is to list it as confounded with the refit
+        # (a rotor on a base joint about the vertical is its link's Izz, a payload the last link's
+        # parameters): only the CAD tolerance of the inertial refit tells them apart; scored apart
         conf = res.get("confounded_with_inertia_refit") or []
-        row["unidentifiable"] = [f"{t['effect']}@{t.get('joint')}" if t.get("joint") else t["effect"] for t in lib
-                                 if any(c["effect"] == t["effect"] and where_ok(c, t) and c.get("relative_residual", 1.0) <= 1e-6
-                                        for c in conf)]
-        row["identifiable"] = len(row["unidentifiable"]) < len(lib)
+        row["in_span"] = [f"{t['effect']}@{t.get('joint')}" if t.get("joint") else t["effect"] for t in lib
+                          if any(c["effect"] == t["effect"] and where_ok(c, t) and c.get("relative_residual", 1.0) <= 1e-6
+                                 for c in conf)]
+        row["outside_span"] = len(row["in_span"]) < len(lib)
     row["floor_unknown"] = verdict == "floor_unknown"  # the floor could not be measured: counted apart
     if truth["family"] == "null":
         row["alarm"] = bool(sel) or verdict not in ("within_noise", "floor_unknown")
@@ -137,12 +137,13 @@ def summarise(rows: list[dict]) -> dict:
                   both_found=mean(fam["pair"], "all_found")),
         in_library=dict(n=len(lib), top1_effect=mean(lib, "top1_effect"), top1_joint=mean(lib, "top1_joint"),
                         median_shrink=float(np.median([r["shrink"] for r in lib])) if lib else None),
-        # the cases whose every planted effect is exactly in the inertial refit's span, listed as
-        # confounded with it: scored apart (no torque data can name them), never dropped
-        unidentifiable=[r["id"] for r in lib if not r.get("identifiable", True)],
-        identifiable=dict(n=sum(r.get("identifiable", True) for r in lib),
-                          top1_effect=mean([r for r in lib if r.get("identifiable", True)], "top1_effect"),
-                          top1_joint=mean([r for r in lib if r.get("identifiable", True)], "top1_joint")),
+        # the cases whose every planted effect lies exactly in the inertial refit's span (listed by
+        # the diagnosis as confounded with it): beside the rate over all cases, never instead of it
+        in_span=dict(ids=[r["id"] for r in lib if not r.get("outside_span", True)],
+                     top1=int(sum(r["top1_effect"] for r in lib if not r.get("outside_span", True)))),
+        outside_span=dict(n=sum(r.get("outside_span", True) for r in lib),
+                          top1_effect=mean([r for r in lib if r.get("outside_span", True)], "top1_effect"),
+                          top1_joint=mean([r for r in lib if r.get("outside_span", True)], "top1_joint")),
         out_of_library=dict(n=len(fam["out_of_library"]), wrong_explained=int(sum(r["wrong_explained"] for r in fam["out_of_library"])),
                             median_shrink=float(np.median([r["shrink"] for r in fam["out_of_library"]])) if fam["out_of_library"] else None),
         null=dict(n=len(fam["null"]), alarms=int(sum(r["alarm"] for r in fam["null"]))),
@@ -164,9 +165,9 @@ def markdown(s: dict, rows: list[dict], header: str = "") -> str:
           f"both named: {_pct(s['pair']['both_found'])} |",
           f"| in-library, all | {s['in_library']['n']} | {_pct(s['in_library']['top1_effect'])} | {_pct(s['in_library']['top1_joint'])} | "
           f"median shrink of the excess: {'n/a' if s['in_library']['median_shrink'] is None else format(s['in_library']['median_shrink'], '.0f') + ' %'} |",
-          f"| in-library, identifiable from the data | {s['identifiable']['n']} | {_pct(s['identifiable']['top1_effect'])} | "
-          f"{_pct(s['identifiable']['top1_joint'])} | exactly in the inertial refit's span and listed as confounded with it: "
-          f"{', '.join(s['unidentifiable']) or 'none'} |",
+          f"| in-library, outside the inertial refit's span | {s['outside_span']['n']} | {_pct(s['outside_span']['top1_effect'])} | "
+          f"{_pct(s['outside_span']['top1_joint'])} | exactly in the span (only the CAD tolerance tells them apart): "
+          f"{', '.join(s['in_span']['ids']) or 'none'}, named first in {s['in_span']['top1']} |",
           f"| out of library | {s['out_of_library']['n']} | | | explained by a wrong effect: {s['out_of_library']['wrong_explained']} |",
           f"| null (nothing planted) | {s['null']['n']} | | | alarms: {s['null']['alarms']} |",
           "", f"Time per case: median {s['median_seconds'] or float('nan'):.0f} s, max {s['max_seconds'] or float('nan'):.0f} s."
