@@ -92,8 +92,8 @@ def batched(fn: Callable, *, program: str | None = None, batch_size: int | None 
     explicit ``fuse=True`` or a ``batch_size`` means ``"blocks"``, otherwise ``"vmap"``.
 
     ``devices``: split the batch evenly over these devices (``shard_map``; a batch that does not
-    divide is padded with its last item, and the padding dropped). XLA:CPU runs one such program
-    on one core; to use several cores, start Python with
+    divide is padded with its last item, and the padding dropped). XLA:CPU may not keep every
+    core busy with one such program; to split it, start Python with
     ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` (before JAX is imported) and
     pass ``jax.devices()``. Keep ``fn`` free of LAPACK-backed calls there (Cholesky, solves,
     eigenvalues): with several CPU devices in one process, jaxlib 0.10's batched LAPACK kernels
@@ -469,8 +469,8 @@ def sweep(
       different sweep, or a damaged chunk, raises :class:`jflex.DataError` naming the file, and
       nothing in it is reused (clear the folder or pass another ``out_dir``).
     - ``devices``: devices to shard each chunk over. Default: every device of ``jax.devices()``,
-      except that on CPU each process contributes one device: one XLA:CPU device already runs a
-      chunk on every core, and with several CPU devices in one process jaxlib 0.10's batched
+      except that on CPU each process contributes one device: one XLA:CPU device already spreads a
+      chunk over the cores, and with several CPU devices in one process jaxlib 0.10's batched
       LAPACK kernels (Cholesky, triangular solves, eigenvalues) can wait forever on a thread
       pool the other device's kernel holds (seen with ``forward_dynamics(method="crba")`` on 2
       cores). Pass ``jax.devices()`` to split over them anyway.
