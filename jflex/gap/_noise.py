@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import _frequency_model as L
+from ._torque import _filtered
 
 if TYPE_CHECKING:
     from ._case import Case
@@ -393,7 +394,8 @@ def black_box_noise(s, resid, m, seed: int = 0):
         # (CAD masses, a payload) is linear in it, but through sums of angles and products of
         # rates the smooth features above reach only roughly (a UR5 shoulder's bound stayed at
         # 4 x its noise with a 7 % mass error)
-        Yf = s.lp(Y.reshape(N, -1)).reshape(Y.shape) if hasattr(s, "lp") else Y
+        # through the set's parallel filter: the copy the inertial refit made and keeps with the set
+        Yf = _filtered(s, "Y") if hasattr(s, "cache") else Y
         err = np.zeros_like(resid)
         for j in np.flatnonzero(np.asarray(m, bool)):
             Aj = np.concatenate([Phi[:, :nb], Yf[:, j, :]], axis=1)
