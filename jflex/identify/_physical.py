@@ -10,12 +10,12 @@ every real 10-vector ``(alpha, d1, d2, d3, s12, s23, s13, t1, t2, t3)`` is a con
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from .._errors import ParameterError
 from .._spatial import inertia_matrix3
@@ -80,20 +80,26 @@ def is_consistent(pi, tol: float = 1e-9) -> bool:
 class PhysicalResult(NamedTuple):
     """``theta`` (p,): consistent standard parameters (inertial block first, then the rest);
     ``inertia`` (n, 10); ``cost``: final ``0.5 |r|^2`` (of the weighted rows, over every sample
-    also when the fit ran on the compressed system); ``steps``; ``result``: optimistix code.
+    also when the fit ran on the compressed system); ``steps``; ``stop``: which rule ended the fit
+    (``"converged"``, ``"cost stalled"``, ``"step limit"``); ``result``: the same as an
+    optimistix code.
 
     When the best consistent body lies on the boundary of consistency (a zero principal moment),
     its log-Cholesky coordinates run off to infinity, so the solver's step criterion is never met
     although the cost has long stopped changing: the fit then stops once ``stall_steps`` steps
-    lower the chi-square by less than ``stall_chi2``, and ``stop`` says which rule ended it
-    (``"converged"``, ``"cost stalled"``, ``"step limit"``)."""
+    lower the chi-square by less than ``stall_chi2``."""
 
     theta: np.ndarray
     inertia: np.ndarray
     cost: float
     steps: int
-    result: object
-    stop: str = ""
+    stop: str
+
+    @property
+    def result(self):
+        import optimistix as optx  # here, not at import: 0.3 s of a fresh process's fit
+
+        return optx.RESULTS.successful if self.stop == "converged" else optx.RESULTS.nonlinear_max_steps_reached
 
 
 def _row_weights(weights, m: int):
@@ -175,43 +181,65 @@ def physical_fit(
     offset = 0.0  # |y|^2 - |Q^T y|^2: the part of the cost no theta can change
     if compress if compress is not None else m > 2 * p:
         # R of [A y] holds R, Q^T y and the residual no theta reaches: Q itself (m x p) is never formed
-        Rxy = np.linalg.qr(np.column_stack([A, y]), mode="r")
+        Rxy = _r_factor(A, y)
         A, y = Rxy[:p, :p], Rxy[:p, p]
         offset = float(Rxy[p, p] ** 2) if Rxy.shape[0] > p else 0.0
-    args = tuple(jnp.asarray(v) for v in (A, y, prior, w, ynorm))
-    resid, finish = _programs(n_links)
-    solver = solver if solver is not None else optx.LevenbergMarquardt(rtol=1e-12, atol=1e-14)
-    # placed as the solver's own results are, so its second round reuses the first's program
+    # device_put, not jnp.asarray: the latter compiles a copy program per shape (jax 0.10)
+    args = tuple(jax.device_put(np.asarray(v, dtype=float)) for v in (A, y, prior, w, ynorm))
+    resid, finish, marquardt = _programs(n_links)
+    # placed as the programs' own results are, so a second fit reuses the first's programs
     u0 = jax.device_put(u0, jax.devices()[0])
+    if solver is None:
+        u, steps, code = marquardt(u0, args, jax.device_put(np.array([m, offset, stall_chi2, 1e-12, 1e-14])),
+                                   jax.device_put(np.array([max_steps, stall_steps])))
+        steps, stop = int(steps), ("step limit", "converged", "cost stalled")[int(code)]
+    else:
+        u, steps, stop = _optimistix_rounds(resid, finish, solver, u0, args, m, offset, max_steps,
+                                                    stall_chi2, stall_steps)
+    th, r = (np.asarray(v) for v in finish(u, args))
+    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), steps, stop)
+
+
+def _r_factor(A, y, block: int = 4096):
+    """R of the QR factorisation of ``[A y]``, block of rows by block of rows (each stacked under
+    the R so far): the same R up to the signs of its rows, in about 40 % of the time of one QR of
+    the tall matrix (blocks that stay in cache) and with no copy of it."""
+    R = np.zeros((0, A.shape[1] + 1))
+    for i in range(0, A.shape[0], block):
+        R = np.linalg.qr(np.vstack([R, np.column_stack([A[i : i + block], y[i : i + block]])]), mode="r")
+    return R
+
+
+def _optimistix_rounds(resid, finish, solver, u, args, m, offset, max_steps, stall_chi2, stall_steps):
+    """The fit by a user's optimistix solver, in rounds of ``stall_steps`` steps (the same
+    compiled solver each round: same function and shapes) with the stall rule between rounds."""
+    import optimistix as optx
 
     def cost_of(u):
         return 0.5 * float(np.sum(np.asarray(finish(u, args)[1]) ** 2)) + 0.5 * offset
 
-    u, steps, prev, stop = u0, 0, cost_of(u0), "step limit"
-    result = optx.RESULTS.nonlinear_max_steps_reached  # what a solver given no steps reports
+    steps, prev, stop = 0, cost_of(u), "step limit"
     while steps < max_steps:
-        # in rounds of stall_steps: the same compiled solver each round (same function and shapes)
         sol = optx.least_squares(resid, solver, u, args=args, max_steps=min(stall_steps, max_steps - steps),
                                  throw=False)
-        u, steps, result = sol.value, steps + int(sol.stats["num_steps"]), sol.result
+        u, steps = sol.value, steps + int(sol.stats["num_steps"])
         cost = cost_of(u)
-        if result == optx.RESULTS.successful:
+        if sol.result == optx.RESULTS.successful:
             stop = "converged"
             break
         if (prev - cost) * m / cost <= stall_chi2:  # the chi-square change 2 (prev - cost) / s^2, s^2 = 2 cost / m
             stop = "cost stalled"
             break
         prev = cost
-    th, r = (np.asarray(v) for v in finish(u, args))
-    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), steps, result, stop)
+    return u, steps, stop
 
 
 _PROGRAMS: dict = {}
 
 
 def _programs(n_links: int):
-    """The residual ``(u, args) -> r`` and ``(u, args) -> (theta, unscaled r)`` for ``n_links``
-    bodies, made once per count: the data ``args = (A, y, prior, w, ynorm)`` are arguments, not
+    """The residual ``(u, args) -> r``, ``(u, args) -> (theta, unscaled r)`` and the compiled
+    default fit (:func:`_marquardt`) for ``n_links`` bodies, made once per count: the data ``args = (A, y, prior, w, ynorm)`` are arguments, not
     constants, so every fit of the same shapes in a process runs the programs already compiled."""
     if n_links not in _PROGRAMS:
         ni = 10 * n_links
@@ -225,9 +253,87 @@ def _programs(n_links: int):
             th = theta_of(u)
             return jnp.concatenate([(A @ th - y) / ynorm, w * (th - prior) / ynorm])
 
-        @jax.jit
         def finish(u, args):
             return theta_of(u), resid(u, args) * args[4]
 
-        _PROGRAMS[n_links] = (resid, finish)
+        # XLA:CPU's optimisation level 0: the programs compile in a fraction of the time, and
+        # their arithmetic on a (2 p, p) system is no part of the wait
+        quick = {"xla_backend_optimization_level": 0}
+        _PROGRAMS[n_links] = (resid, jax.jit(finish, compiler_options=quick),
+                              jax.jit(functools.partial(_marquardt, theta_of, resid), compiler_options=quick))
     return _PROGRAMS[n_links]
+
+
+def _marquardt(theta_of, resid, u, args, reals, ints):
+    """Levenberg-Marquardt (Levenberg's damping, Nielsen's update of it) for
+    :func:`physical_fit`, with its stall rule, as one ``lax.while_loop``.
+
+    Optimistix's solver compiles in about 2.6 s for an 8-body fit, most of a fresh process's
+    consistent identification, and this loop in a third of a second; the fit is small (p
+    unknowns, ``2 p`` rows once compressed) and its Jacobian is the data's linear map times the
+    per-body log-Cholesky Jacobian, so normal equations serve.
+
+    ``reals = (m, offset, stall_chi2, rtol, atol)``, ``ints = (max_steps, stall_steps)``; returns
+    ``(u, steps, code)`` with code 0 at the step limit, 1 converged (the step and the cost change
+    within ``atol + rtol |.|``), 2 stalled (``stall_steps`` steps lowered the chi-square of the
+    ``m`` rows by at most ``stall_chi2``)."""
+    m, offset, stall_chi2, rtol, atol = reals
+    max_steps, stall_steps = ints
+    A, _, _, w, ynorm = args
+
+    def full_cost(r):  # 0.5 |W (A theta - y)|^2 over every sample, the compressed part included
+        return 0.5 * (jnp.sum(r**2) * ynorm**2 + offset)
+
+    def body(c):
+        u, r, f, lam, nu, k, window_cost, window_start, _ = c
+        T = jax.jacfwd(theta_of)(u)  # block diagonal: each body's log-Cholesky map, 1 elsewhere
+        J = jnp.concatenate([A @ T, w * T]) / ynorm
+        g, H = J.T @ r, J.T @ J
+        # Levenberg's damping lam 1, from 1e-3 of H's largest diagonal entry: Marquardt's diag(H)
+        # lets the directions the data barely see (a 1e-12 diagonal) take steps the exponentials
+        # of the log-Cholesky map overshoot by orders of magnitude
+        lam = jnp.where(k == 0, 1e-3 * jnp.max(jnp.diag(H)), lam)
+        step = -_spd_solve(H + lam * jnp.eye(H.shape[0], dtype=H.dtype), g)
+        r_new = resid(u + step, args)
+        f_new = 0.5 * r_new @ r_new
+        # the model's decrease 0.5 |r|^2 - 0.5 |r + J step|^2, in Madsen, Nielsen and Tingleff's
+        # form: a sum of two positive terms, with no cancellation as the residual vanishes
+        predicted = 0.5 * (lam * step @ step - g @ step)
+        rho = (f - f_new) / predicted
+        ok = jnp.isfinite(f_new) & (predicted > 0) & (rho > 1e-4)
+        small_step = jnp.max(jnp.abs(step) / (atol + rtol * jnp.abs(u))) < 1.0
+        converged = small_step & ((ok & (jnp.abs(f - f_new) <= atol + rtol * f)) | (predicted <= atol + rtol * f))
+        u, r, f = (jnp.where(ok, new, old) for new, old in ((u + step, u), (r_new, r), (f_new, f)))
+        lam = jnp.where(ok, lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), lam * nu)
+        nu = jnp.where(ok, 2.0, 2.0 * nu)
+        k = k + 1
+        window_end = k - window_start >= stall_steps
+        cost = full_cost(r)
+        stalled = window_end & ((window_cost - cost) * m / cost <= stall_chi2)
+        window_cost, window_start = jnp.where(window_end, cost, window_cost), jnp.where(window_end, k, window_start)
+        code = jnp.where(converged, 1, jnp.where(stalled, 2, 0))
+        return u, r, f, lam, nu, k, window_cost, window_start, code
+
+    r0 = resid(u, args)
+    zero = jnp.zeros((), ints.dtype)
+    init = (u, r0, 0.5 * r0 @ r0, jnp.asarray(0.0, u.dtype), jnp.asarray(2.0, u.dtype), zero, full_cost(r0), zero, zero)
+    out = jax.lax.while_loop(lambda c: (c[-1] == 0) & (c[5] < max_steps), body, init)
+    return out[0], out[5], out[-1]
+
+
+def _spd_solve(M, b):
+    """``M^-1 b`` for a symmetric positive definite M (p, p) by Cholesky, in ``lax`` loops: a
+    LAPACK call would make jaxlib import scipy.linalg (0.4 s of a fresh process) for a solve of
+    p^3 / 3 flops. Not positive definite: NaN."""
+    n = M.shape[0]
+    idx = jnp.arange(n)
+
+    def column(j, L):
+        v = M[:, j] - L @ L[j]  # L[j] holds the finished columns k < j only
+        return L.at[:, j].set(jnp.where(idx >= j, v / jnp.sqrt(v[j]), 0.0))
+
+    L = jax.lax.fori_loop(0, n, column, jnp.zeros_like(M))
+    z = jax.lax.fori_loop(0, n, lambda i, z: z.at[i].set((b[i] - L[i] @ z) / L[i, i]), jnp.zeros_like(b))
+    return jax.lax.fori_loop(
+        0, n, lambda k, x: x.at[n - 1 - k].set((z[n - 1 - k] - L[:, n - 1 - k] @ x) / L[n - 1 - k, n - 1 - k]),
+        jnp.zeros_like(b))
