@@ -205,3 +205,24 @@ def test_physical_fit_stops_when_the_cost_stalls_within_a_fraction_of_one_chi_sq
     assert quick.stop in ("converged", "cost stalled") and quick.steps <= long.steps
     chi2_gain = (quick.cost - long.cost) * A.shape[0] / long.cost
     assert -1e-9 <= chi2_gain < 0.5, (quick.steps, long.steps, chi2_gain)
+
+
+def test_physical_fit_default_loop_reaches_optimistix_levenberg_marquardt():
+    # the built-in compiled loop against optimistix's solver on the same problem: the same cost
+    # (to a small fraction of one chi-square unit) and consistent bodies
+    import optimistix as optx
+
+    robot = staubli_like(8)
+    reg = idf.Regressor(compensator=(1, 3))
+    samples, tau, (fv, fc, B) = _friction_data(robot, 150, 13, noise=np.array([0.05, 0.05, 0.05]))
+    A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
+    prior = _cad_prior(np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B)))
+    ours = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4)
+    ref = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4,
+                           solver=optx.LevenbergMarquardt(rtol=1e-12, atol=1e-14))
+    chi2 = abs(ours.cost - ref.cost) * A.shape[0] / ref.cost
+    assert chi2 < 0.5, (ours.cost, ref.cost, ours.steps, ref.steps)
+    assert ours.stop in ("converged", "cost stalled")
+    assert (ours.result == optx.RESULTS.successful) == (ours.stop == "converged")
+    for i in range(3):
+        jflex.check_inertia(ours.inertia[i], f"link {i}")

@@ -147,7 +147,9 @@ def physical_fit(
       every sample: ``|W (A theta - y)|^2 = |R theta - Q^T W y|^2 + const``, so the objective,
       its gradient and Gauss-Newton matrix, and hence the answer, are the same, at the cost of
       p rows instead of m per step. Default: when m > 2 p.
-    - ``solver``: an optimistix least-squares solver (default Levenberg-Marquardt).
+    - ``solver``: an optimistix least-squares solver, run in rounds of ``stall_steps`` steps;
+      default (``None``): Levenberg-Marquardt compiled as one loop, which starts in a third of
+      the time of optimistix's (the first call of a fresh process is what a user waits for).
     - ``max_steps``: the solver's step limit.
     - ``stall_chi2``, ``stall_steps``: stop when ``stall_steps`` steps lower the chi-square
       ``|r|^2 / s^2`` by less than ``stall_chi2``, with ``s^2 = |r|^2 / m`` the mean squared
