@@ -226,3 +226,16 @@ def test_physical_fit_default_loop_reaches_optimistix_levenberg_marquardt():
     assert (ours.result == optx.RESULTS.successful) == (ours.stop == "converged")
     for i in range(3):
         jflex.check_inertia(ours.inertia[i], f"link {i}")
+
+
+def test_physical_fit_refuses_non_finite_data_and_a_misshapen_prior():
+    rng = np.random.default_rng(0)
+    A, y = rng.normal(size=(200, 30)), rng.normal(size=200)
+    bad = A.copy()
+    bad[3, 4] = np.nan
+    with pytest.raises(jflex.DataError, match=r"A contains NaN/inf \(first at index \(3, 4\)\)"):
+        idf.physical_fit(bad, y, 3)
+    with pytest.raises(jflex.DataError, match="y contains NaN/inf"):
+        idf.physical_fit(A, np.where(np.arange(200) == 7, np.inf, y), 3)
+    with pytest.raises(jflex.ParameterError, match="prior must be 30 finite numbers"):
+        idf.physical_fit(A, y, 3, prior=np.ones(29))

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import ParameterError
+from .._errors import DataError, ParameterError
 from .._spatial import inertia_matrix3
 
 
@@ -166,6 +166,10 @@ def physical_fit(
     ni = 10 * n_links
     if p < ni:
         raise ParameterError(f"physical_fit: A has {p} columns, fewer than 10 x {n_links} inertial parameters")
+    for name, v in (("A", A), ("y", y)):
+        if not np.all(np.isfinite(v)):
+            bad = np.argwhere(~np.isfinite(v))[0]
+            raise DataError(f"physical_fit: {name} contains NaN/inf (first at index {tuple(int(i) for i in bad)})")
     if weights is not None:
         wr = _row_weights(weights, m)
         A, y = A * wr[:, None], y * wr
@@ -173,6 +177,9 @@ def physical_fit(
         prior = np.zeros(p)
         prior[:ni] = np.tile([1.0, 0, 0, 0, 1e-2, 0, 1e-2, 0, 0, 1e-2], n_links)
     prior = np.asarray(prior, dtype=float)
+    if prior.shape != (p,) or not np.all(np.isfinite(prior)):
+        raise ParameterError(f"physical_fit: prior must be {p} finite numbers (one per column of A), got shape {prior.shape}"
+                             + ("" if prior.shape != (p,) else " with NaN/inf"))
     u0_in = np.concatenate([inertia_to_log_cholesky(prior[10 * i : 10 * i + 10]) for i in range(n_links)])
     u0 = np.concatenate([u0_in, prior[ni:]])
     # scales of the full system (|A|_F is |R|_F): the compressed fit solves the same problem
