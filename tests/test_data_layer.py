@@ -396,3 +396,25 @@ def test_given_cutoff_reads_the_torque_noise_below_it(tmp_path, monkeypatch):
     got = np.asarray(s.processing["torque_noise_nm"])
     # white noise of std 0.05 through a 20 Hz low-pass at 500 Hz keeps about sqrt(20 / 250) of it
     assert np.all(got > 0.3 * 0.05 * np.sqrt(20 / 250)) and np.all(got < 3 * 0.05 * np.sqrt(20 / 250)), got
+
+
+def test_spectrum_floor_band_ends_where_the_motions_power_ends():
+    # A 5 kHz log of interpolated angles (no sensor noise; at rest for 5 s, so the second
+    # difference's robust spread reads 0 and the motion band gives no answer), whose servoed
+    # motion adds a tail of power ~ f^-4 that stays 100 x above the spectrum's floor to ~130 Hz.
+    # The motion's harmonics reach 1.25 Hz: the cutoff keeps them and stays far below the tail.
+    fs = 5000.0
+    t = np.arange(int(9 * fs)) / fs
+    rng = np.random.default_rng(3)
+    tm = np.where(t > 5.0, t - 5.0, 0.0)
+    q = np.zeros((t.size, 3))
+    for j in range(3):
+        for k in range(1, 6):
+            q[:, j] += 0.3 / k * (1 - np.cos(2 * np.pi * 0.25 * k * tm)) * rng.uniform(0.8, 1.2)
+        w = np.cumsum(np.cumsum(rng.standard_normal(t.size))) / fs**2
+        w -= np.polyval(np.polyfit(t, w, 3), t)
+        q[:, j] += np.where(t > 5.0, 1e-4 * w / w.std(), 0.0)
+    fc, info = choose_cutoff(q, 1 / fs)
+    assert info["method"] == "spectrum_floor"
+    assert info["floor_band_hz"] > 80  # where the tail meets the floor
+    assert 2.5 * 1.25 < fc < 60, info
