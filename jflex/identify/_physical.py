@@ -204,9 +204,21 @@ def physical_fit(
         steps, stop = int(steps), ("step limit", "converged", "cost stalled")[int(code)]
     else:
         u, steps, stop = _optimistix_rounds(resid, finish, solver, u0, args, m, offset, max_steps,
-                                                    stall_chi2, stall_steps)
+                                            stall_chi2, stall_steps)
     th, r = (np.asarray(v) for v in finish(u, args))
-    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(0.5 * (r @ r + offset)), steps, stop)
+    return PhysicalResult(th, th[:ni].reshape(n_links, 10), float(_cost(r, offset)), steps, stop)
+
+
+def _cost(r, offset):
+    """``0.5 |W (A theta - y)|^2`` over every sample from the fitted rows' unscaled residual ``r``
+    and the compressed part ``offset`` no theta reaches (NumPy or traced)."""
+    return 0.5 * (r @ r + offset)
+
+
+def _stalled(prev, cost, m, stall_chi2):
+    """The stall rule: the chi-square change ``2 (prev - cost) / s^2``, ``s^2 = 2 cost / m``, is at
+    most ``stall_chi2`` (NumPy or traced)."""
+    return (prev - cost) * m / cost <= stall_chi2
 
 
 def _r_factor(A, y, block: int = 4096):
@@ -225,7 +237,7 @@ def _optimistix_rounds(resid, finish, solver, u, args, m, offset, max_steps, sta
     import optimistix as optx
 
     def cost_of(u):
-        return 0.5 * float(np.sum(np.asarray(finish(u, args)[1]) ** 2)) + 0.5 * offset
+        return float(_cost(np.asarray(finish(u, args)[1]), offset))
 
     steps, prev, stop = 0, cost_of(u), "step limit"
     while steps < max_steps:
@@ -236,7 +248,7 @@ def _optimistix_rounds(resid, finish, solver, u, args, m, offset, max_steps, sta
         if sol.result == optx.RESULTS.successful:
             stop = "converged"
             break
-        if (prev - cost) * m / cost <= stall_chi2:  # the chi-square change 2 (prev - cost) / s^2, s^2 = 2 cost / m
+        if _stalled(prev, cost, m, stall_chi2):
             stop = "cost stalled"
             break
         prev = cost
@@ -248,8 +260,9 @@ _PROGRAMS: dict = {}
 
 def _programs(n_links: int):
     """The residual ``(u, args) -> r``, ``(u, args) -> (theta, unscaled r)`` and the compiled
-    default fit (:func:`_marquardt`) for ``n_links`` bodies, made once per count: the data ``args = (A, y, prior, w, ynorm)`` are arguments, not
-    constants, so every fit of the same shapes in a process runs the programs already compiled."""
+    default fit (:func:`_marquardt`) for ``n_links`` bodies, made once per count: the data
+    ``args = (A, y, prior, w, ynorm)`` are arguments, not constants, so every fit of the same
+    shapes in a process runs the programs already compiled."""
     if n_links not in _PROGRAMS:
         ni = 10 * n_links
 
@@ -290,9 +303,6 @@ def _marquardt(theta_of, resid, u, args, reals, ints):
     max_steps, stall_steps = ints
     A, _, _, w, ynorm = args
 
-    def full_cost(r):  # 0.5 |W (A theta - y)|^2 over every sample, the compressed part included
-        return 0.5 * (jnp.sum(r**2) * ynorm**2 + offset)
-
     def body(c):
         u, r, f, lam, nu, k, window_cost, window_start, _ = c
         T = jax.jacfwd(theta_of)(u)  # block diagonal: each body's log-Cholesky map, 1 elsewhere
@@ -317,15 +327,16 @@ def _marquardt(theta_of, resid, u, args, reals, ints):
         nu = jnp.where(ok, 2.0, 2.0 * nu)
         k = k + 1
         window_end = k - window_start >= stall_steps
-        cost = full_cost(r)
-        stalled = window_end & ((window_cost - cost) * m / cost <= stall_chi2)
+        cost = _cost(r * ynorm, offset)
+        stalled = window_end & _stalled(window_cost, cost, m, stall_chi2)
         window_cost, window_start = jnp.where(window_end, cost, window_cost), jnp.where(window_end, k, window_start)
         code = jnp.where(converged, 1, jnp.where(stalled, 2, 0))
         return u, r, f, lam, nu, k, window_cost, window_start, code
 
     r0 = resid(u, args)
     zero = jnp.zeros((), ints.dtype)
-    init = (u, r0, 0.5 * r0 @ r0, jnp.asarray(0.0, u.dtype), jnp.asarray(2.0, u.dtype), zero, full_cost(r0), zero, zero)
+    init = (u, r0, 0.5 * r0 @ r0, jnp.asarray(0.0, u.dtype), jnp.asarray(2.0, u.dtype), zero,
+            _cost(r0 * ynorm, offset), zero, zero)
     out = jax.lax.while_loop(lambda c: (c[-1] == 0) & (c[5] < max_steps), body, init)
     return out[0], out[5], out[-1]
 
