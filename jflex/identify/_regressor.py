@@ -86,14 +86,13 @@ class Regressor(eqx.Module):
         **Arguments:** ``q``, ``qd``, ``qdd`` (n,) [rad, rad/s, rad/s^2].
         """
         q, qd, qdd = checked_arrays("Regressor", robot, q=q, qd=qd, qdd=qdd)
-        return jnp.concatenate([_rigid(robot, q[:, None], qd[:, None], qdd[:, None])[..., 0],
-                                self._joint_columns(robot, q, qd, qdd)], axis=1)
+        return _rows(self, robot, q[None], qd[None], qdd[None])
 
     def _joint_columns(self, robot: Robot, q, qd, qdd):
-        """The columns after the rigid block (n, p - 10 n) of one sample."""
+        """The columns after the rigid block (n, p - 10 n) of one sample (some there must be)."""
         n = robot.nq
-        cols = [jnp.zeros((n, 0), dtype=jnp.result_type(float))]
-        eye = jnp.eye(n, dtype=cols[0].dtype)
+        cols = []
+        eye = jnp.eye(n, dtype=jnp.result_type(float))
         if self.viscous:
             cols.append(eye * qd)
         if self.coulomb:
@@ -104,7 +103,7 @@ class Regressor(eqx.Module):
         if self.compensator:
             j, k = self.compensator
             c = -jnp.cos(jnp.arange(1, k + 1) * q[j])
-            cols.append(jnp.zeros((n, k), dtype=cols[0].dtype).at[j].set(c))
+            cols.append(jnp.zeros((n, k), dtype=eye.dtype).at[j].set(c))
         cols += [e.regressor(robot, q, qd, qdd) for e in self.effects]
         return jnp.concatenate(cols, axis=1)
 
@@ -216,7 +215,7 @@ def _hat(a):
     """(..., 3, B) -> (..., 3, 3, B) with ``_hat(a) @ b == cross(a, b)``: one product with the
     Levi-Civita symbol (three operations to trace and compile, where slicing and stacking the
     entries took seventeen)."""
-    return jnp.sum(_HAT[..., None] * a[..., None, None, :, :], axis=-2)
+    return _mv(_HAT[..., None], a[..., None, :, :])
 
 
 def _cross(a, b):
@@ -226,7 +225,7 @@ def _cross(a, b):
 
 def _inertia_times(x):
     """(..., 3, B) -> (..., 3, 6, B): ``I x`` as a linear map of (Ixx, Ixy, Iyy, Ixz, Iyz, Izz)."""
-    return jnp.sum(_INERTIA[..., None] * x[..., None, None, :, :], axis=-2)
+    return _mv(_INERTIA[..., None], x[..., None, :, :])
 
 
 def _body_regressor(w, v, aw, av):
