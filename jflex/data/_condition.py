@@ -268,8 +268,11 @@ def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_sp
 def _power_edge(f, P, share: float) -> float:
     """The highest, over the columns of a spectrum ``P`` (F, n), of the frequency below which
     ``share`` of the column's power lies (columns without power are skipped; 0 when none has)."""
-    edges = [float(f[min(int(np.searchsorted(np.cumsum(p), share * p.sum())), f.size - 1)])
-             for p in P.T if p.sum() > 0]
+    edges = []
+    for p in P.T:
+        c = np.cumsum(p)
+        if c[-1] > 0:
+            edges.append(float(f[min(int(np.searchsorted(c, share * c[-1])), f.size - 1)]))
     return max(edges, default=0.0)
 
 
@@ -331,8 +334,7 @@ def choose_cutoff(q, dt: float, *, qd=None, factor: float = CUTOFF_FACTOR, decim
     # fallback 2, "energy": where the angles' (or rates') power ends
     x = np.asarray(qd, float) if qd is not None else q
     f, P = welch(detrend(x, axis=0), fs=1.0 / dt, nperseg=nper, axis=0)
-    c = np.cumsum(P.sum(axis=1))
-    f_e = float(f[min(int(np.searchsorted(c, ENERGY_FRACTION * c[-1])), f.size - 1)]) if c[-1] > 0 else 0.0
+    f_e = _power_edge(f, P.sum(axis=1, keepdims=True), ENERGY_FRACTION)
     info["energy_band_hz"] = f_e
     fc = factor * max(f_e, df)
     if fc < top:
