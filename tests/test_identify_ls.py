@@ -166,14 +166,20 @@ def _cad_prior(truth):
     return prior
 
 
+def _consistent_problem(n_samples):
+    """``(A, y, prior)``: a 3-link arm with friction and a gravity compensator, noisy torques and a
+    wrong but consistent CAD prior."""
+    robot = staubli_like(8)
+    reg = idf.Regressor(compensator=(1, 3))
+    samples, tau, (fv, fc, B) = _friction_data(robot, n_samples, 13, noise=np.array([0.05, 0.05, 0.05]))
+    A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
+    return A, y, _cad_prior(np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B)))
+
+
 def test_physical_fit_on_the_compressed_system_gives_the_full_answer():
     # |W(A th - y)|^2 = |R th - Q^T W y|^2 + const: same gradient and Gauss-Newton matrix, so the
     # QR-compressed fit (p rows a step) takes the steps the fit over every sample takes
-    robot = staubli_like(8)
-    reg = idf.Regressor(compensator=(1, 3))
-    samples, tau, (fv, fc, B) = _friction_data(robot, 60, 13, noise=np.array([0.05, 0.05, 0.05]))
-    A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
-    prior = _cad_prior(np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B)))
+    A, y, prior = _consistent_problem(60)
     w_joint = np.array([1.0, 0.5, 2.0])
     kw = dict(prior=prior, prior_weight=1e-4, max_steps=40)
     for weights in (None, w_joint):
@@ -195,11 +201,7 @@ def test_physical_fit_stops_when_the_cost_stalls_within_a_fraction_of_one_chi_sq
     # a body whose best consistent fit lies on the boundary of consistency never meets the step
     # criterion; the fit stops once 20 steps gain less than 0.1 of chi-square, and what a much
     # longer run still gains is a small fraction of one chi-square unit (invisible to any test)
-    robot = staubli_like(8)
-    reg = idf.Regressor(compensator=(1, 3))
-    samples, tau, (fv, fc, B) = _friction_data(robot, 150, 13, noise=np.array([0.05, 0.05, 0.05]))
-    A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
-    prior = _cad_prior(np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B)))
+    A, y, prior = _consistent_problem(150)
     quick = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4)
     long = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4, max_steps=600, stall_chi2=0.0)
     assert quick.stop in ("converged", "cost stalled") and quick.steps <= long.steps
@@ -212,11 +214,7 @@ def test_physical_fit_default_loop_reaches_optimistix_levenberg_marquardt():
     # (to a small fraction of one chi-square unit) and consistent bodies
     import optimistix as optx
 
-    robot = staubli_like(8)
-    reg = idf.Regressor(compensator=(1, 3))
-    samples, tau, (fv, fc, B) = _friction_data(robot, 150, 13, noise=np.array([0.05, 0.05, 0.05]))
-    A, y = np.asarray(reg.stack(robot, *samples)), tau.ravel()
-    prior = _cad_prior(np.asarray(reg.vector(robot, fv=fv, fc=fc, compensator=B)))
+    A, y, prior = _consistent_problem(150)
     ours = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4)
     ref = idf.physical_fit(A, y, 3, prior=prior, prior_weight=1e-4,
                            solver=optx.LevenbergMarquardt(rtol=1e-12, atol=1e-14))
