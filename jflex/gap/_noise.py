@@ -353,9 +353,7 @@ def black_box_noise(s, resid, m, seed: int = 0):
     Ks = [K for K in BLACK_BOX_HARMONICS if len(mv) and nb + K * len(mv) <= N // 8]
 
     def series(K):
-        H = np.cos(np.pi * u[:, :, None] * np.arange(1, K + 1)).reshape(N, -1)
-        sd = H.std(axis=0)
-        return (H - H.mean(axis=0)) / np.where(sd > 0, sd, 1.0)
+        return z(np.cos(np.pi * u[:, :, None] * np.arange(1, K + 1)).reshape(N, -1))
 
     nbk = BLACK_BOX_BLOCKS
     # one feature matrix holds every model's columns (the angle series nest: 8 in 16 in 32)
