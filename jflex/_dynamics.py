@@ -23,6 +23,7 @@ from ._derivatives import _kernel, _matrix, aba_derivatives
 from ._errors import ParameterError
 from ._robot import PRISMATIC, Robot
 from ._tree import accumulate, consts, host, motion, support, walk
+from ._trig import cos_sin
 
 _REFERENCES = ("local", "world", "local_world_aligned")
 
@@ -259,7 +260,8 @@ def _z_cos_sin(robot, c, i, qi):
         return None
     if not (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
         return None
-    return s.barrier(jnp.cos(qi), jnp.sin(qi) if s._is(ax.z, 1.0) else -jnp.sin(qi), fence=c.fence)
+    cos, sin = cos_sin(qi)
+    return s.barrier(cos, sin if s._is(ax.z, 1.0) else -sin, fence=c.fence)
 
 
 def crba(robot: Robot, q):

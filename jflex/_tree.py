@@ -18,6 +18,7 @@ import numpy as np
 
 from . import _scalar as s
 from ._robot import PRISMATIC, Robot
+from ._trig import cos_sin
 
 
 class LinkStates(NamedTuple):
@@ -101,7 +102,7 @@ def transform(robot: Robot, c: RobotConsts, i: int, qi):
     """(R, p) of body i in its parent's frame at joint value ``qi`` (scalarised)."""
     if robot.joint_types[i] == PRISMATIC:
         return c.Rpl[i], c.ppl[i] + c.Rpl[i].mv(c.axis[i].scale(qi))
-    return c.Rpl[i].mm(s.rot_axis_angle(c.axis[i], jnp.cos(qi), jnp.sin(qi))), c.ppl[i]
+    return c.Rpl[i].mm(s.rot_axis_angle(c.axis[i], *cos_sin(qi))), c.ppl[i]
 
 
 def walk(robot: Robot, c: RobotConsts, q, qd=None, qdd=None, base_acc: s.V3 | None = None, world=False) -> LinkStates:
