@@ -101,10 +101,11 @@ def test_random_dh_robots_match_pinocchio(seed, n, standard):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("fuse", [True, False])
-def test_batched_kernels_match_pinocchio(fuse):
-    # the batch path the benchmarks time: blocks (fuse=True) or one unfused program (fuse=False,
-    # where XLA:CPU once miscompiled lax.map blocks and RNEA/ABA came out wrong by O(1)); the
+@pytest.mark.parametrize("program", ["vmap", "blocks", "unfused"])
+def test_batched_kernels_match_pinocchio(program):
+    # the batch paths the benchmarks time: the default one vmapped program and blocks, both compiled
+    # with the kernels' optimization barriers kept through XLA:CPU's fusion, and one unfused program
+    # (where XLA:CPU once miscompiled lax.map blocks and RNEA/ABA came out wrong by O(1)); the
     # benchmarks' Panda at full size (JFLEX_SLOW=1), else a random 3-joint DH arm with a prismatic
     # joint (the Panda's six batched programs compile for minutes on 2 cores, a UR5's for over one;
     # the unfused programs' compile grows with the unrolled traversal, one joint less is a quarter less)
@@ -133,11 +134,11 @@ def test_batched_kernels_match_pinocchio(fuse):
         "aba": (lambda a, b, c: jflex.aba(robot, a, b, c), lambda i: pin.aba(model, data, q[i], qd[i], qdd[i])),
     }
     for name, (f, ref) in kernels.items():
-        out = np.asarray(jflex.batched(f, batch_size=128, fuse=fuse)(q, qd, qdd))
+        out = np.asarray(jflex.batched(f, program=program, batch_size=128 if program == "blocks" else None)(q, qd, qdd))
         R = np.array([np.array(ref(i), copy=True) for i in range(N)])
         if name == "crba":
             R = np.triu(R) + np.swapaxes(np.triu(R, 1), 1, 2)
-        np.testing.assert_allclose(out, R, rtol=1e-9, atol=1e-9 * np.abs(R).max(), err_msg=f"{name}, fuse={fuse}")
+        np.testing.assert_allclose(out, R, rtol=1e-9, atol=1e-9 * np.abs(R).max(), err_msg=f"{name}, {program}")
 
 
 def _fd(f, x, h=1e-6):
