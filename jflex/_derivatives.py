@@ -35,7 +35,7 @@ from . import _scalar as s
 from ._checks import guard, has_inertia, moving_inertia
 from ._coupling import checked as _checked
 from ._robot import PRISMATIC, Robot
-from ._tree import consts, transform
+from ._tree import consts, joint_cos_sin, transform
 
 
 def _dtype():
@@ -65,11 +65,12 @@ def _world_pass(robot: Robot, c, q, qd, qdd, f_ext):
     n = robot.nq
     a0 = (s.ZERO, -c.gravity)
     S, V, A, Y, Yd, h, F, P = ([None] * n for _ in range(8))
+    cs = joint_cos_sin(robot, q)
     for i in range(n):
         par = robot.parents[i]
         # placements composed here, not by _tree.walk, whose world placements carry no fence: every
         # consumer would recompute the chain of rotations (measured: 70 sines per sine)
-        R, p = transform(robot, c, i, q[i])
+        R, p = transform(robot, c, i, q[i], cs[i])
         oR, op = (R, p) if par < 0 else (P[par][0].mm(R), P[par][1] + P[par][0].mv(p))
         oR, op = P[i] = s.barrier(oR, op, fence=c.fence)
         ax = oR.mv(c.axis[i])

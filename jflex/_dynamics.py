@@ -245,13 +245,13 @@ def _inertia_to_parent(robot, c, i, qi, ls, I):
     """Body i's (composite) inertia about its parent's frame. For a revolute joint about +-z (every
     DH joint, most URDF joints) the joint rotation is applied first, in closed form, and the
     constant placement after it, where trace-time folding makes it nearly free."""
-    rz = _z_cos_sin(robot, c, i, qi)
+    rz = _z_cos_sin(robot, c, i, qi, ls.cs[i] if ls.cs else None)
     if rz is not None:
         return I.rotated_z(*rz).to_parent(c.Rpl[i], c.ppl[i])
     return I.to_parent(ls.R[i], ls.p[i])
 
 
-def _z_cos_sin(robot, c, i, qi):
+def _z_cos_sin(robot, c, i, qi, cs=None):
     """``(cos, sin)`` of body i's rotation about its placement's z when joint i is revolute about
     +-z (every DH joint, most URDF joints), else None. The test is on trace-time floats: a traced
     axis (gradients in the robot) takes the general path."""
@@ -260,7 +260,7 @@ def _z_cos_sin(robot, c, i, qi):
         return None
     if not (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
         return None
-    cos, sin = cos_sin(qi)
+    cos, sin = cs if cs is not None else cos_sin(qi)
     return s.barrier(cos, sin if s._is(ax.z, 1.0) else -sin, fence=c.fence)
 
 
@@ -384,11 +384,11 @@ def _signed_permutation(R: s.M33):
     return out
 
 
-def _z_rotation(robot, c, i, qi):
+def _z_rotation(robot, c, i, qi, cs=None):
     """(signed permutation of the placement, cos, sin) when body i sits at R = Rpl Rz(+-q_i) with
     Rpl a signed permutation (see :func:`_signed_permutation`), else None."""
     perm = _signed_permutation(c.Rpl[i])
-    rz = None if perm is None else _z_cos_sin(robot, c, i, qi)
+    rz = None if perm is None else _z_cos_sin(robot, c, i, qi, cs)
     return None if rz is None else (perm, *rz)
 
 
@@ -575,7 +575,7 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn, flag=False):
             Iac = _mv6(Ia, cc[i])
             pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
             Ia, pa = _barrier6(c.fence, Ia, pa)
-            XtIaX = _congruence(ls.R[i], ls.p[i], Ia, _z_rotation(robot, c, i, q[i]))
+            XtIaX = _congruence(ls.R[i], ls.p[i], Ia, _z_rotation(robot, c, i, q[i], ls.cs[i]))
             IA[par] = _sym_add(IA[par], XtIaX)
             fw, fv = s.force_to_parent(ls.R[i], ls.p[i], s.V3(*pa[:3]), s.V3(*pa[3:]))
             pA[par] = [s.add(a, b) for a, b in zip(pA[par], _v6(fw, fv))]

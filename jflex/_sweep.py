@@ -33,6 +33,7 @@ from ._errors import ConfigError, DataError, ParameterError, ShapeError
 from ._fingerprint import fingerprint
 from ._paths import output_folder
 from ._progress import bar
+from ._trig import vectorised
 
 _MANIFEST = "sweep.json"
 _CHANGED = {
@@ -139,10 +140,25 @@ def _compile_program(fn, program, batch_size, devices):
 _KEEP_BARRIERS = {"xla_disable_hlo_passes": "cse_barrier_expander"}
 
 
+def _vectorised(fn):
+    """``fn`` traced with the kernels' arithmetic cosines and sines (see ``jflex/_trig.py``): a
+    batch on CPU vectorises only without calls into the C library."""
+
+    @functools.wraps(fn)
+    def traced(*args):
+        with vectorised():
+            return fn(*args)
+
+    return traced
+
+
 def _program(fn, *, program, batch_size, devices, reduce=None, nested=False):
     """``nested``: for a call inside a caller's trace, where JAX takes no compiler options."""
-    cpu = jax.default_backend() == "cpu" and not nested
+    on_cpu = jax.default_backend() == "cpu"
+    cpu = on_cpu and not nested
     options = None if not cpu else {"xla_disable_hlo_passes": "fusion"} if program == "unfused" else _KEEP_BARRIERS
+    if on_cpu and program != "unfused":
+        fn = _vectorised(fn)
     if program == "blocks":
         size = int(batch_size) if batch_size is not None else default_batch_size()
 
@@ -353,14 +369,22 @@ def _rebuild(template, values):
 
 @eqx.filter_jit
 def _vmapped(template, values, *items):
-    return jax.vmap(_rebuild(template, values))(*items)
+    return jax.vmap(_sweep_item(template, values))(*items)
 
 
 @eqx.filter_jit
 def _vmapped_flagged(template, values, *items):
     """:func:`_vmapped` with fn's checks as flags (see :class:`_Checked`); the messages are a static
     output, kept by ``filter_jit`` with the compiled program."""
-    return _vmap_collected(_rebuild(template, values), 0, *items)
+    return _vmap_collected(_sweep_item(template, values), 0, *items)
+
+
+def _sweep_item(template, values):
+    return _on_cpu_vectorised(_rebuild(template, values))
+
+
+def _on_cpu_vectorised(fn):
+    return _vectorised(fn) if jax.default_backend() == "cpu" else fn
 
 
 def _raise_failed(failed, first, messages, start=0):
@@ -387,7 +411,7 @@ def _hashable(tree) -> bool:
         return False
 
 
-_FALLBACK: dict = {}  # fn -> eqx.filter_jit(jax.vmap(fn)) for functions that cannot be split
+_FALLBACK: dict = {}  # fn -> eqx.filter_jit(jax.vmap(_on_cpu_vectorised(fn))) for functions that cannot be split
 _FALLBACK_SIZE = 32
 
 
@@ -434,11 +458,11 @@ def _constant_program(fn):
     try:
         return _FALLBACK[fn]
     except TypeError:  # an unhashable callable object: compiled for this call only
-        return eqx.filter_jit(jax.vmap(fn))
+        return eqx.filter_jit(jax.vmap(_on_cpu_vectorised(fn)))
     except KeyError:
         if len(_FALLBACK) >= _FALLBACK_SIZE:
             _FALLBACK.pop(next(iter(_FALLBACK)))
-        prog = _FALLBACK[fn] = eqx.filter_jit(jax.vmap(fn))
+        prog = _FALLBACK[fn] = eqx.filter_jit(jax.vmap(_on_cpu_vectorised(fn)))
         return prog
 
 

@@ -33,6 +33,7 @@ class LinkStates(NamedTuple):
     v: list | None  # origin velocity, body axes
     aw: list | None  # spatial acceleration (angular), body axes
     av: list | None  # spatial acceleration (linear), body axes
+    cs: list | None = None  # (cos q_i, sin q_i) per revolute joint, None for a prismatic one
 
 
 def host(a):
@@ -98,11 +99,27 @@ def motion(robot: Robot, c: RobotConsts, i: int):
     return c.axis[i], s.ZERO
 
 
-def transform(robot: Robot, c: RobotConsts, i: int, qi):
-    """(R, p) of body i in its parent's frame at joint value ``qi`` (scalarised)."""
+def joint_cos_sin(robot: Robot, q) -> list:
+    """``(cos q_i, sin q_i)`` per revolute joint (None for a prismatic one) from one evaluation of
+    :func:`_trig.cos_sin` over the joints: its arithmetic appears once in the program, not once per
+    joint (each copy is some forty operations for XLA to fuse and compile)."""
+    rev = [i for i in range(robot.nq) if robot.joint_types[i] != PRISMATIC]
+    if not rev:
+        return [None] * robot.nq
+    qv = q if len(rev) == robot.nq and hasattr(q, "shape") else jnp.stack([q[i] for i in rev])
+    cv, sv = cos_sin(qv)
+    out = [None] * robot.nq
+    for k, i in enumerate(rev):
+        out[i] = (cv[k], sv[k])
+    return out
+
+
+def transform(robot: Robot, c: RobotConsts, i: int, qi, cs=None):
+    """(R, p) of body i in its parent's frame at joint value ``qi`` (scalarised); ``cs``: its
+    ``(cos qi, sin qi)`` when known (:func:`joint_cos_sin`)."""
     if robot.joint_types[i] == PRISMATIC:
         return c.Rpl[i], c.ppl[i] + c.Rpl[i].mv(c.axis[i].scale(qi))
-    return c.Rpl[i].mm(s.rot_axis_angle(c.axis[i], *cos_sin(qi))), c.ppl[i]
+    return c.Rpl[i].mm(s.rot_axis_angle(c.axis[i], *(cs if cs is not None else cos_sin(qi)))), c.ppl[i]
 
 
 def walk(robot: Robot, c: RobotConsts, q, qd=None, qdd=None, base_acc: s.V3 | None = None, world=False) -> LinkStates:
@@ -118,9 +135,10 @@ def walk(robot: Robot, c: RobotConsts, q, qd=None, qdd=None, base_acc: s.V3 | No
     aw = [None] * n if want_a else None
     av = [None] * n if want_a else None
     a0 = -c.gravity if base_acc is None else base_acc
+    cs = joint_cos_sin(robot, q)
     for i in range(n):
         par = robot.parents[i]
-        R[i], p[i] = transform(robot, c, i, q[i])
+        R[i], p[i] = transform(robot, c, i, q[i], cs[i])
         if world:
             if par < 0:
                 oR[i], op[i] = R[i], p[i]
@@ -141,7 +159,7 @@ def walk(robot: Robot, c: RobotConsts, q, qd=None, qdd=None, base_acc: s.V3 | No
         bw, bv = s.cross_motion(w[i], v[i], sw.scale(qd[i]), sv.scale(qd[i]))
         aw[i], av[i] = caw + sw.scale(qdd[i]) + bw, cav + sv.scale(qdd[i]) + bv
         R[i], p[i], w[i], v[i], aw[i], av[i] = s.barrier(R[i], p[i], w[i], v[i], aw[i], av[i], fence=c.fence)
-    return LinkStates(R, p, oR, op, w, v, aw, av)
+    return LinkStates(R, p, oR, op, w, v, aw, av, cs)
 
 
 def accumulate(robot: Robot, ls: LinkStates, n_list: list, f_list: list, fence=None):

@@ -1,10 +1,16 @@
-"""Cosine and sine of joint angles as plain arithmetic, so XLA:CPU can vectorise the kernels.
+"""Cosine and sine of joint angles as plain arithmetic, so XLA:CPU can vectorise batch kernels.
 
 XLA:CPU lowers ``cos`` and ``sin`` to calls into the C library, one element at a time; a single
 such call inside a fused loop keeps LLVM from vectorising the whole loop. On the 7-joint Panda
 the batched RNEA and ABA ran about 2x slower for their seven sines and cosines than for the rest
 of their arithmetic. Here both come from one range reduction and two short polynomials (adds,
 multiplies, a rounding and selects), which vectorise.
+
+That form is some forty operations where ``jnp.cos`` is one, and tracing and compiling them costs
+more than it saves outside large batches: with it everywhere, the gap diagnosis of the built-in
+demo traced and compiled 17.1 s instead of 12.3. So :func:`cos_sin` takes it only while
+:func:`vectorised` is active, which ``jflex.batched`` and ``jflex.sweep`` do while tracing their
+programs; elsewhere it is ``jnp.cos`` and ``jnp.sin``.
 
 Method: Cody-Waite reduction by pi/2 with pi/2 split into two 33-bit parts and a 53-bit tail, so
 ``n * part`` is exact for ``|n| < 2**20`` (``|x|`` up to about 1.6e6 rad); the kernels on
@@ -15,6 +21,9 @@ over that range; beyond it, the reduction loses a few bits more than the angle's
 """
 
 from __future__ import annotations
+
+import contextlib
+import contextvars
 
 import jax
 import jax.numpy as jnp
@@ -65,9 +74,23 @@ def _cos_sin64_jvp(primals, tangents):
     return (c, s), (-s * dx, c * dx)
 
 
+_VECTORISED = contextvars.ContextVar("jflex_vectorised_trig", default=False)
+
+
+@contextlib.contextmanager
+def vectorised():
+    """While active (at trace time), :func:`cos_sin` of float64 values is the arithmetic form."""
+    token = _VECTORISED.set(True)
+    try:
+        yield
+    finally:
+        _VECTORISED.reset(token)
+
+
 def cos_sin(x):
-    """``(cos(x), sin(x))``; for float64 arrays by the vectorisable arithmetic above."""
+    """``(cos(x), sin(x))``: inside :func:`vectorised` and for float64 by the arithmetic above,
+    else by ``jnp.cos`` and ``jnp.sin``."""
     x = jnp.asarray(x)
-    if x.dtype != jnp.float64:
+    if x.dtype != jnp.float64 or not _VECTORISED.get():
         return jnp.cos(x), jnp.sin(x)
     return _cos_sin64(x)

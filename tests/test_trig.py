@@ -1,4 +1,4 @@
-"""The kernels' cosine and sine (jflex/_trig.py) against the C library through NumPy, their
+"""The batch kernels' cosine and sine (jflex/_trig.py) against the C library through NumPy, their
 derivatives against the closed forms, and the batched kernels free of library calls."""
 
 import re
@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 import jflex
-from jflex._trig import cos_sin
+from jflex._sweep import _program
+from jflex._trig import cos_sin as _library_cos_sin
+from jflex._trig import vectorised
+
+
+def cos_sin(x):
+    with vectorised():
+        return _library_cos_sin(x)
 
 
 def _ulps(got, ref):
@@ -55,10 +62,18 @@ def test_float32_takes_the_library_functions():
 
 
 def test_batched_kernels_call_no_sine_or_cosine():
-    # a call into the C library inside a fused loop keeps XLA:CPU from vectorising the loop
-    robot = jflex.from_dh(np.array([[0.0, 0.3, 0.0, np.pi / 2], [0.0, 0.0, 0.4, 0.0], [0.0, 0.0, 0.3, 0.0]]),
-                          inertias=[{"mass": 1.0, "com": [0.1, 0.0, 0.0], "inertia": np.diag([0.01, 0.02, 0.02])}] * 3)
-    q = jnp.zeros((64, 3))
+    # a call into the C library inside a fused loop keeps XLA:CPU from vectorising the loop; outside
+    # batch programs the kernels keep jnp.cos/jnp.sin, which trace and compile faster
+    robot = jflex.load_robot("ur5")
+    q = jnp.zeros((64, robot.nq))
+    library = re.compile(r"\b(sine|cosine)\(")
     for fn in (jflex.rnea, jflex.aba):
-        text = jax.jit(jax.vmap(lambda a, f=fn: f(robot, a, a, a))).lower(q).compile().as_text()
-        assert not re.search(r"\b(sine|cosine)\(", text), fn.__name__
+        item = lambda a, f=fn: f(robot, a, a, a)
+        for program in ("vmap", "blocks"):
+            text = _program(item, program=program, batch_size=16, devices=[]).lower(q).compile().as_text()
+            assert not library.search(text), (fn.__name__, program)
+        assert library.search(jax.jit(jax.vmap(item)).lower(q).compile().as_text()), fn.__name__
+    x = np.linspace(-2, 2, 10 * robot.nq).reshape(10, robot.nq)
+    out = jflex.batched(lambda a: jflex.rnea(robot, a, a, a))(x)
+    ref = jax.vmap(lambda a: jflex.rnea(robot, a, a, a))(x)
+    np.testing.assert_allclose(out, ref, rtol=1e-13, atol=1e-13)
