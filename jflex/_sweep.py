@@ -50,7 +50,7 @@ def _tune_allocator_once():
         tune_allocator()
 
 
-_PROGRAMS = ("vmap", "blocks", "unfused", "fastest")
+_PROGRAMS = ("vmap", "blocks", "unfused", "barriers", "fastest")
 # lax.map block size when none is given: a block of a rigid-body kernel's working set stays in a
 # CPU core's cache at 1024 states; a GPU needs far more states in flight to fill its cores (an H100
 # keeps 132 x 2048 threads resident), so blocks there hold 2**18 states (a rule, not a measurement)
@@ -71,13 +71,16 @@ def batched(fn: Callable, *, program: str | None = None, batch_size: int | None 
 
     ``program`` chooses how the batch is compiled:
 
-    - ``"vmap"`` (the default): one fused ``jax.jit(jax.vmap(fn))``. On CPU it is compiled with
-      the optimization barriers kept through XLA's fusion pass (which otherwise drops them first
-      and recomputes each body's shared work in every fused consumer): the kernels' per-body
-      barriers then bound the fusions. On the 7-joint Panda at 1e5 states ``rnea``, ``aba`` and
-      ``crba`` ran 1.1-3x faster so than as the plain ``jit(vmap)`` (``benchmarks/bench_dynamics.py``
-      prints both). The barriers are kept only in a top-level call: inside a caller's ``jit``
-      JAX takes no compiler options, and ``fn`` compiles as the caller's program does.
+    - ``"vmap"`` (the default): one fused ``jax.jit(jax.vmap(fn))``. On CPU, ``fn`` is traced
+      with the kernels' cosines and sines of joint angles as plain arithmetic (``jflex/_trig.py``),
+      which lets XLA:CPU vectorise the fused loops: on the 7-joint Panda at 1e5 states ``rnea``
+      ran 0.34 us a state instead of 0.66, ``aba`` 0.69 instead of 1.05, ``crba`` 0.23 instead
+      of 1.01, for 0.1-0.5 s more compilation.
+    - ``"barriers"``: ``"vmap"`` compiled with the optimization barriers kept through XLA's
+      fusion pass (XLA:CPU otherwise drops them first and recomputes each body's shared work in
+      every fused consumer). The Panda's ``aba`` then ran 0.45 us a state, ``rnea`` 0.27, for
+      0.6-0.9 s more compilation: worth it for many calls, not for one. A top-level call only
+      (inside a caller's ``jit`` JAX takes no compiler options: it compiles as ``"vmap"``).
     - ``"blocks"``: ``lax.map`` over blocks of ``batch_size`` states (default
       :func:`default_batch_size`: 1024 on CPU, 2**18 on GPU), so the working set of a block stays
       in cache and memory is bounded by one block; faster than ``"vmap"`` for the long derivative
@@ -133,10 +136,10 @@ def _compile_program(fn, program, batch_size, devices):
     return _Checked(fn, functools.partial(_program, program=program, batch_size=batch_size, devices=devices))
 
 
-# XLA:CPU expands optimization barriers away before its fusion pass; fusion then recomputes a
-# body's shared work in every consumer (the Panda's ABA compiled to 1660 multiplies from 878, each
-# joint's sin and cos 5-6 times). Kept through fusion, the kernels' per-body barriers bound the
-# fusions: ABA about 2x and CRBA 3x faster at 1e5 states, results equal to 1e-13
+# program="barriers": XLA:CPU expands optimization barriers away before its fusion pass; fusion then
+# recomputes a body's shared work in every consumer (the Panda's ABA compiled to 1660 multiplies
+# from 878). Kept through fusion, the kernels' per-body barriers bound the fusions, at the price of
+# one compiled loop per fusion (100-300 instead of 1-20: longer compiles)
 _KEEP_BARRIERS = {"xla_disable_hlo_passes": "cse_barrier_expander"}
 
 
@@ -156,7 +159,7 @@ def _program(fn, *, program, batch_size, devices, reduce=None, nested=False):
     """``nested``: for a call inside a caller's trace, where JAX takes no compiler options."""
     on_cpu = jax.default_backend() == "cpu"
     cpu = on_cpu and not nested
-    options = None if not cpu else {"xla_disable_hlo_passes": "fusion"} if program == "unfused" else _KEEP_BARRIERS
+    options = None if not cpu else {"unfused": {"xla_disable_hlo_passes": "fusion"}, "barriers": _KEEP_BARRIERS}.get(program)
     if on_cpu and program != "unfused":
         fn = _vectorised(fn)
     if program == "blocks":
@@ -283,7 +286,7 @@ class _Fastest:
         return run(*args)
 
     def _pick(self, sig, args):
-        names = ["vmap", "blocks"] + (["unfused"] if jax.default_backend() == "cpu" else [])
+        names = ["vmap", "blocks"] + (["unfused", "barriers"] if jax.default_backend() == "cpu" else [])
         best, ref = None, None
         for name in names:
             run = _compile_program(self._fn, name, self._batch_size, self._devices)

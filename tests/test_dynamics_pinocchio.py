@@ -101,10 +101,10 @@ def test_random_dh_robots_match_pinocchio(seed, n, standard):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("program", ["vmap", "blocks", "unfused"])
+@pytest.mark.parametrize("program", ["vmap", "barriers", "blocks", "unfused"])
 def test_batched_kernels_match_pinocchio(program):
-    # the batch paths the benchmarks time: the default one vmapped program and blocks, both compiled
-    # with the kernels' optimization barriers kept through XLA:CPU's fusion, and one unfused program
+    # the batch paths the benchmarks time: the default one vmapped program, the same with the
+    # kernels' optimization barriers kept through XLA:CPU's fusion, blocks, and one unfused program
     # (where XLA:CPU once miscompiled lax.map blocks and RNEA/ABA came out wrong by O(1)); the
     # benchmarks' Panda at full size (JFLEX_SLOW=1), else a random 3-joint DH arm with a prismatic
     # joint (the Panda's six batched programs compile for minutes on 2 cores, a UR5's for over one;

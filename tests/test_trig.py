@@ -69,7 +69,7 @@ def test_batched_kernels_call_no_sine_or_cosine():
     library = re.compile(r"\b(sine|cosine)\(")
     for fn in (jflex.rnea, jflex.aba):
         item = lambda a, f=fn: f(robot, a, a, a)
-        for program in ("vmap", "blocks"):
+        for program in ("vmap", "barriers", "blocks"):
             text = _program(item, program=program, batch_size=16, devices=[]).lower(q).compile().as_text()
             assert not library.search(text), (fn.__name__, program)
         assert library.search(jax.jit(jax.vmap(item)).lower(q).compile().as_text()), fn.__name__
