@@ -23,7 +23,6 @@ from ._derivatives import _kernel, _matrix, aba_derivatives
 from ._errors import ParameterError
 from ._robot import PRISMATIC, Robot
 from ._tree import accumulate, consts, host, motion, support, walk
-from ._trig import cos_sin
 
 _REFERENCES = ("local", "world", "local_world_aligned")
 
@@ -241,26 +240,26 @@ def gravity(robot: Robot, q):
     return _rnea(robot, q, z, z, None, "gravity")
 
 
-def _inertia_to_parent(robot, c, i, qi, ls, I):
+def _inertia_to_parent(robot, c, i, ls, I):
     """Body i's (composite) inertia about its parent's frame. For a revolute joint about +-z (every
     DH joint, most URDF joints) the joint rotation is applied first, in closed form, and the
     constant placement after it, where trace-time folding makes it nearly free."""
-    rz = _z_cos_sin(robot, c, i, qi, ls.cs[i] if ls.cs else None)
+    rz = _z_cos_sin(robot, c, i, ls.cs[i])
     if rz is not None:
         return I.rotated_z(*rz).to_parent(c.Rpl[i], c.ppl[i])
     return I.to_parent(ls.R[i], ls.p[i])
 
 
-def _z_cos_sin(robot, c, i, qi, cs=None):
+def _z_cos_sin(robot, c, i, cs):
     """``(cos, sin)`` of body i's rotation about its placement's z when joint i is revolute about
-    +-z (every DH joint, most URDF joints), else None. The test is on trace-time floats: a traced
+    +-z (every DH joint, most URDF joints), else None; ``cs``: the tree walk's ``(cos q_i, sin q_i)``. The test is on trace-time floats: a traced
     axis (gradients in the robot) takes the general path."""
     ax = c.axis[i]
     if robot.joint_types[i] == PRISMATIC or not (s._is(ax.x, 0.0) and s._is(ax.y, 0.0)):
         return None
     if not (s._is(ax.z, 1.0) or s._is(ax.z, -1.0)):
         return None
-    cos, sin = cs if cs is not None else cos_sin(qi)
+    cos, sin = cs
     return s.barrier(cos, sin if s._is(ax.z, 1.0) else -sin, fence=c.fence)
 
 
@@ -287,7 +286,7 @@ def _crba(robot: Robot, q, fn, check=True):
     for i in reversed(range(n)):
         par = robot.parents[i]
         if par >= 0:
-            (Ic[par],) = s.barrier(Ic[par] + _inertia_to_parent(robot, c, i, q[i], ls, Ic[i]), fence=c.fence)
+            (Ic[par],) = s.barrier(Ic[par] + _inertia_to_parent(robot, c, i, ls, Ic[i]), fence=c.fence)
     M = [[0.0] * n for _ in range(n)]
     for i in range(n):
         sw, sv = motion(robot, c, i)
@@ -384,11 +383,11 @@ def _signed_permutation(R: s.M33):
     return out
 
 
-def _z_rotation(robot, c, i, qi, cs=None):
+def _z_rotation(robot, c, i, cs):
     """(signed permutation of the placement, cos, sin) when body i sits at R = Rpl Rz(+-q_i) with
     Rpl a signed permutation (see :func:`_signed_permutation`), else None."""
     perm = _signed_permutation(c.Rpl[i])
-    rz = None if perm is None else _z_cos_sin(robot, c, i, qi, cs)
+    rz = None if perm is None else _z_cos_sin(robot, c, i, cs)
     return None if rz is None else (perm, *rz)
 
 
@@ -575,7 +574,7 @@ def _aba_core(robot: Robot, q, qd, tau, f_ext, fn, flag=False):
             Iac = _mv6(Ia, cc[i])
             pa = [s.sum_(pA[i][r], Iac[r], s.mul(U[i][r], uD)) for r in range(6)]
             Ia, pa = _barrier6(c.fence, Ia, pa)
-            XtIaX = _congruence(ls.R[i], ls.p[i], Ia, _z_rotation(robot, c, i, q[i], ls.cs[i]))
+            XtIaX = _congruence(ls.R[i], ls.p[i], Ia, _z_rotation(robot, c, i, ls.cs[i]))
             IA[par] = _sym_add(IA[par], XtIaX)
             fw, fv = s.force_to_parent(ls.R[i], ls.p[i], s.V3(*pa[:3]), s.V3(*pa[3:]))
             pA[par] = [s.add(a, b) for a, b in zip(pA[par], _v6(fw, fv))]

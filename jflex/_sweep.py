@@ -155,13 +155,17 @@ def _vectorised(fn):
     return traced
 
 
+def _on_cpu_vectorised(fn):
+    """:func:`_vectorised` on CPU; elsewhere ``fn`` as it is (the library calls it avoids are XLA:CPU's)."""
+    return _vectorised(fn) if jax.default_backend() == "cpu" else fn
+
+
 def _program(fn, *, program, batch_size, devices, reduce=None, nested=False):
     """``nested``: for a call inside a caller's trace, where JAX takes no compiler options."""
-    on_cpu = jax.default_backend() == "cpu"
-    cpu = on_cpu and not nested
+    cpu = jax.default_backend() == "cpu" and not nested
     options = None if not cpu else {"unfused": {"xla_disable_hlo_passes": "fusion"}, "barriers": _KEEP_BARRIERS}.get(program)
-    if on_cpu and program != "unfused":
-        fn = _vectorised(fn)
+    if program != "unfused":
+        fn = _on_cpu_vectorised(fn)
     if program == "blocks":
         size = int(batch_size) if batch_size is not None else default_batch_size()
 
@@ -372,22 +376,14 @@ def _rebuild(template, values):
 
 @eqx.filter_jit
 def _vmapped(template, values, *items):
-    return jax.vmap(_sweep_item(template, values))(*items)
+    return jax.vmap(_on_cpu_vectorised(_rebuild(template, values)))(*items)
 
 
 @eqx.filter_jit
 def _vmapped_flagged(template, values, *items):
     """:func:`_vmapped` with fn's checks as flags (see :class:`_Checked`); the messages are a static
     output, kept by ``filter_jit`` with the compiled program."""
-    return _vmap_collected(_sweep_item(template, values), 0, *items)
-
-
-def _sweep_item(template, values):
-    return _on_cpu_vectorised(_rebuild(template, values))
-
-
-def _on_cpu_vectorised(fn):
-    return _vectorised(fn) if jax.default_backend() == "cpu" else fn
+    return _vmap_collected(_on_cpu_vectorised(_rebuild(template, values)), 0, *items)
 
 
 def _raise_failed(failed, first, messages, start=0):
