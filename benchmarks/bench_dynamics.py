@@ -475,6 +475,15 @@ def bench_derivatives(robot, model, batches, algorithms, threads=2, devices=None
                     raise SystemExit(f"{name}: Pinocchio's {par} differs from jflex by {pdiff:.1e}")
                 row["pinocchio_parallel_us"] = 1e6 * best_time(call) / N
                 row["pinocchio_parallel_threads"] = threads
+                if "derivatives" not in name:
+                    # jflex.sweep as users call it: NumPy in, NumPy out, one chunk; compiled at its
+                    # first call, reused by the later ones
+                    sw = lambda: jflex.sweep(f, q, qd, qdd, tau, chunk_size=N, progress=False)
+                    sdiff = float(np.abs(sw() - pres).max() / np.abs(pres).max())
+                    if not sdiff < 1e-9:
+                        raise SystemExit(f"{name}: jflex.sweep differs from Pinocchio's {par} by {sdiff:.1e}")
+                    row["jflex_sweep_us"] = 1e6 * best_time(sw) / N
+                    row["ratio_pin_parallel_over_jflex_sweep"] = row["pinocchio_parallel_us"] / row["jflex_sweep_us"]
                 if devices:
                     jf2 = jflex.batched(f, devices=devices)
                     d2 = float(np.abs(np.asarray(jax.block_until_ready(jf2(q, qd, qdd, tau))) - pres).max() / np.abs(pres).max())
@@ -491,6 +500,8 @@ def bench_derivatives(robot, model, batches, algorithms, threads=2, devices=None
             print(f"{N:>7} {name:<17} jflex {row['jflex_us']:8.3f} us  pin loop {row['pinocchio_loop_us']:8.3f} us "
                   f"(x{row['ratio_pin_over_jflex']:.2f})  pin {threads}-thread batch {fmt(row['pinocchio_parallel_us'], '{:8.3f}')} us "
                   f"(x{fmt(row['ratio_pin_parallel_over_jflex'], '{:.2f}')})  compile {compile_s:.1f} s  max rel diff {diff:.1e}"
+                  + (f"  | sweep {row['jflex_sweep_us']:8.3f} us (pin batch / sweep x{row['ratio_pin_parallel_over_jflex_sweep']:.2f})"
+                     if "jflex_sweep_us" in row else "")
                   + (f"  | jflex on {row['jflex_devices']} CPU devices {row['jflex_devices_us']:8.3f} us "
                      f"(pin {threads}-thread batch / jflex x{row['ratio_pin_parallel_over_jflex_devices']:.2f})"
                      if "jflex_devices_us" in row else ""),

@@ -1,5 +1,5 @@
 """sweep and batched as users call them: a second sweep reuses its compiled program (counted by
-traces, not timed), every batched program gives the same numbers, degenerate input is refused by
+compilations, not timed), every batched program gives the same numbers, degenerate input is refused by
 name or answered with an empty result, and a resume sees a robot however deeply it is held."""
 
 import functools
@@ -51,13 +51,23 @@ class Compiles:
 
 
 def test_second_sweep_reuses_the_compiled_program(q):
-    jflex.sweep(gravity_of(pendulum(2.0)), q, chunk_size=16, progress=False)
+    with Compiles() as c:  # the first robot's numbers are compiled in as constants
+        jflex.sweep(gravity_of(pendulum(2.0)), q, chunk_size=16, progress=False)
+        first = c.n
+    with Compiles() as c:  # a new closure over the same numbers: the same program
+        jflex.sweep(gravity_of(pendulum(2.0)), q, chunk_size=16, progress=False)
+    assert first >= 1 and c.n == 0
+    with Compiles() as c:  # other numbers: one program taking them as arguments
+        np.testing.assert_allclose(jflex.sweep(gravity_of(pendulum(9.0)), q, chunk_size=16, progress=False),
+                                   expected(9.0, q), rtol=1e-12)
+    assert c.n == first
     with Compiles() as c:
         for m in (3.0, 2.0, 7.0):  # a new closure each call, over a robot with other numbers
             out = jflex.sweep(gravity_of(pendulum(m)), q, chunk_size=16, progress=False)
             np.testing.assert_allclose(out, expected(m, q), rtol=1e-12)
     assert c.n == 0
-    jflex.sweep(functools.partial(traced_gravity, pendulum(4.0)), q, chunk_size=16, progress=False)
+    for m in (4.0, 6.0):
+        jflex.sweep(functools.partial(traced_gravity, pendulum(m)), q, chunk_size=16, progress=False)
     with Compiles() as c:  # functools.partial over the robot
         out = jflex.sweep(functools.partial(traced_gravity, pendulum(5.0)), q, chunk_size=16, progress=False)
         np.testing.assert_allclose(out, expected(5.0, q), rtol=1e-12)
@@ -128,12 +138,12 @@ def test_batched_programs_agree():
     q, v, a = rng.normal(size=(3, 300, 1))
     f = lambda q, v, a: jflex.rnea(robot, q, v, a)
     ref = np.asarray(jax.jit(jax.vmap(f))(q, v, a))
-    for program in ("vmap", "blocks", "unfused"):
+    for program in ("vmap", "blocks", "unfused", "barriers"):
         out = np.asarray(jflex.batched(f, program=program, batch_size=128)(q, v, a))
         np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-12, err_msg=program)
     fastest = jflex.batched(f, program="fastest", batch_size=128)
     np.testing.assert_allclose(np.asarray(fastest(q, v, a)), ref, rtol=1e-12, atol=1e-12)
-    assert list(fastest.choice.values())[0] in ("vmap", "blocks", "unfused")
+    assert list(fastest.choice.values())[0] in ("vmap", "blocks", "unfused", "barriers")
     fastest(q, v, a)
     assert len(fastest.choice) == 1  # the same shapes: no second measurement
     with pytest.raises(jflex.ConfigError, match="program"):
