@@ -42,6 +42,10 @@ def enable_compilation_cache(path: str | os.PathLike | None = None, *, min_compi
 
     **Returns:** the folder in use.
 
+    The traced programs of ``jflex.sweep`` and of the diagnosis are kept there too
+    (``jflex-programs/``), so a later process skips tracing them as well (see
+    ``jflex/_program_cache.py`` for what their key covers).
+
     To clear the cache, delete the folder; to move it, move the folder and pass the new ``path``
     (or set ``JFLEX_CACHE_DIR``). Programs compiled before this call are not stored.
     """
@@ -57,6 +61,9 @@ def enable_compilation_cache(path: str | os.PathLike | None = None, *, min_compi
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time_s))
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", int(min_entry_size_bytes))
+    from ._program_cache import set_folder
+
+    set_folder(folder)  # traced programs beside the compiled ones (jflex/_program_cache.py)
     try:
         # JAX decides once, at its first compile, whether a cache is in use: forget that decision so
         # a call after some compilation still takes effect

@@ -32,6 +32,7 @@ from ._allocator import tune_allocator
 from ._errors import ConfigError, DataError, ParameterError, ShapeError
 from ._fingerprint import fingerprint
 from ._paths import output_folder
+from ._program_cache import persistent_jit
 from ._progress import bar
 from ._trig import vectorised
 
@@ -219,7 +220,7 @@ def flagged_vmap(item_fn, in_axes=0):
     store (it stores none that calls back into Python) and a GPU runs without handing control
     back to the host. Arguments are traced as ``equinox.filter_jit`` traces them."""
 
-    @eqx.filter_jit
+    @persistent_jit
     def program(*args):
         axes = in_axes if isinstance(in_axes, (tuple, list)) else (in_axes,) * len(args)
         # unmapped arguments are closed over, not passed through vmap: they may hold non-array leaves
@@ -337,6 +338,9 @@ class _Code:
     def __eq__(self, other):
         return isinstance(other, _Code) and self.code is other.code and self.globals is other.globals
 
+    def _content_key(self):  # for the traced-program cache (jflex/_program_cache.py)
+        return self.globals.get("__name__"), self.code.co_qualname, self.code.co_firstlineno, self.kwdefaults
+
     def build(self, cells, defaults):
         f = types.FunctionType(self.code, self.globals, self.name, defaults, tuple(types.CellType(c) for c in cells))
         f.__kwdefaults__ = self.kwdefaults
@@ -374,12 +378,12 @@ def _rebuild(template, values):
     return template[1]
 
 
-@eqx.filter_jit
+@persistent_jit
 def _vmapped(template, values, *items):
     return jax.vmap(_on_cpu_vectorised(_rebuild(template, values)))(*items)
 
 
-@eqx.filter_jit
+@persistent_jit
 def _vmapped_flagged(template, values, *items):
     """:func:`_vmapped` with fn's checks as flags (see :class:`_Checked`); the messages are a static
     output, kept by ``filter_jit`` with the compiled program."""
@@ -442,7 +446,7 @@ def _constant_key(template, values):
 
 
 def _flagged_constant(fn):
-    @eqx.filter_jit
+    @persistent_jit
     def program(*items):
         return _vmap_collected(_on_cpu_vectorised(fn), 0, *items)
 

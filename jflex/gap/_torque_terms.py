@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import _rnea
+from .._program_cache import persistent_jit
 from .._sweep import flagged_vmap
 from ..identify._signal import motion_band, zero_phase_lowpass
 from ..effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
@@ -488,7 +489,7 @@ def data_scale(sets) -> DataScale:
     return sc._replace(model_rms=np.sqrt(np.mean(cat("F0") ** 2, axis=0)))
 
 
-@eqx.filter_jit
+@persistent_jit
 def _effect_columns(effect, robot, q, qd, qdd):
     return jax.vmap(lambda a, b, c: effect.regressor(robot, a, b, c))(q, qd, qdd)
 
