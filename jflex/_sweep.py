@@ -253,7 +253,8 @@ class _Checked:
         self._flagged = None
         self._plain = self._nested = None
 
-    def __call__(self, *args):
+    def __call__(self, *args, start=0):
+        """``start``: the index of the first item in a larger batch, for the failed check's message."""
         if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
             if self._nested is None:
                 self._nested = self._build(self._fn, nested=True)
@@ -267,7 +268,7 @@ class _Checked:
                 # a check inside fn's own lax loop cannot leave it as a flag: keep error_if there
                 self._flagged = False
             else:
-                _raise_failed(failed, first, self._messages)
+                _raise_failed(failed, first, self._messages, start)
                 return out
         if self._plain is None:
             self._plain = self._build(self._fn)
@@ -282,13 +283,13 @@ class _Fastest:
         self._programs = {}  # signature -> compiled callable
         self.choice = {}  # signature -> program name
 
-    def __call__(self, *args):
+    def __call__(self, *args, start=0):
         leaves, treedef = jax.tree_util.tree_flatten(args)
         sig = (treedef, tuple((np.shape(x), np.result_type(x).str) for x in leaves))
         run = self._programs.get(sig)
         if run is None:
             run = self._programs[sig] = self._pick(sig, args)
-        return run(*args)
+        return run(*args, start=start)
 
     def _pick(self, sig, args):
         names = ["vmap", "blocks"] + (["unfused", "barriers"] if jax.default_backend() == "cpu" else [])
@@ -530,6 +531,7 @@ def sweep(
     devices=None,
     label: str = "sweep",
     key=None,
+    program: str | None = None,
 ):
     """Evaluate ``fn`` (one item, no batch dimension) over the leading axis of ``args``.
 
@@ -558,6 +560,9 @@ def sweep(
       cores). Pass ``jax.devices()`` to split over them anyway.
     - ``key``: anything whose ``repr`` tells this sweep apart when the fingerprint cannot see a
       change (a model read from a file inside ``fn``, an object attribute it reads).
+    - ``program``: how each chunk is compiled, as in :func:`batched` (``"vmap"``, ``"blocks"``,
+      ``"unfused"``, ``"barriers"``, ``"fastest"``). Default: one vmapped program with the
+      closed-over values folded in as constants (below), kept across sweeps.
 
     **Returns:** the outputs for all N items as NumPy arrays (same pytree structure as ``fn``'s).
     An empty batch (N = 0) returns empty arrays: leading axis 0, then the shape and dtype ``fn``
@@ -585,6 +590,8 @@ def sweep(
             raise ShapeError(f"sweep: every batched argument needs leading axis {N}, got shape {np.shape(leaf)}")
     if chunk_size < 1:
         raise ShapeError(f"sweep: chunk_size must be >= 1, got {chunk_size}")
+    if program is not None and program not in _PROGRAMS:
+        raise ConfigError(f"sweep: program must be None or one of {', '.join(map(repr, _PROGRAMS))}, got {program!r}")
     out_path = _out_folder(out_dir)
     if N == 0:
         # an empty batch maps to empty outputs, as a NumPy function over an empty array does:
@@ -600,7 +607,10 @@ def sweep(
     multi = any(d.process_index != jax.process_index() for d in devices)
     mesh = Mesh(np.array(devices), ("batch",))
     sharding = NamedSharding(mesh, PartitionSpec("batch"))
-    vfn = _sweep_program(fn, jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(np.shape(a)[1:], np.result_type(a)), args))
+    if program is None:
+        vfn = _sweep_program(fn, jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(np.shape(a)[1:], np.result_type(a)), args))
+    else:  # the user's choice of batch program
+        vfn = batched(fn, program=program)
 
     if out_path is not None:
         identity = _identity(fn, args, N, chunk, key)

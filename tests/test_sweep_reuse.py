@@ -151,3 +151,17 @@ def test_batched_programs_agree():
     from jflex._sweep import default_batch_size
 
     assert default_batch_size("cpu") == 1024 and default_batch_size("gpu") >= 1 << 16
+
+
+def test_sweep_takes_the_users_choice_of_program(q):
+    robot = pendulum(2.0)
+    f = lambda x: jflex.gravity(robot, x)
+    for program in ("vmap", "blocks", "fastest"):
+        np.testing.assert_allclose(jflex.sweep(f, q, chunk_size=16, progress=False, program=program),
+                                   expected(2.0, q), rtol=1e-12, err_msg=program)
+    bad = q.copy()
+    bad[40, 0] = np.nan  # the third chunk of 16: the message names the item in the whole sweep
+    with pytest.raises(jflex.DataError, match=r"batch item 40"):
+        jflex.sweep(f, bad, chunk_size=16, progress=False, program="blocks")
+    with pytest.raises(jflex.ConfigError, match="sweep: program must be"):
+        jflex.sweep(f, q, progress=False, program="fast")
