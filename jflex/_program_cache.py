@@ -274,7 +274,12 @@ class _Persistent:
         if program is False:
             return self._jit(*args)
         call, skeleton = program
-        return _filled(skeleton, call(*leaves))
+        try:
+            out = call(*leaves)
+        except (TypeError, ValueError):  # refused at dispatch (an argument the export did not expect)
+            self._programs[known] = False
+            return self._jit(*args)
+        return _filled(skeleton, out)
 
     def _program(self, folder, static, treedef, avals):
         key = _key(self._fn, static, treedef, avals)
