@@ -24,7 +24,6 @@ import functools
 import hashlib
 import os
 import pathlib
-import re
 import types
 
 import equinox as eqx
@@ -32,12 +31,12 @@ import jax
 import numpy as np
 
 from ._checks import _COLLECTED
+from ._fingerprint import _ADDR, _array_bytes
 from ._trig import _VECTORISED
 
 _FOLDER: pathlib.Path | None = None
 _MEMORY = 64  # programs kept in memory per function, and loaded programs by key
-_LOADED: dict = {}  # key -> (jitted call of the exported program, static outputs, output tree)
-_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+_LOADED: dict = {}  # key -> (jitted call of the exported program, output skeleton)
 _SUBFOLDER = "jflex-programs"
 _FORMAT = b"jflex-program-1\n"
 _PACKAGE = pathlib.Path(__file__).resolve().parent
@@ -86,9 +85,7 @@ def _update(h, obj, seen: frozenset) -> None:
         h.update(f"{type(obj).__name__}:{obj!r};".encode())
         return
     if isinstance(obj, (np.ndarray, np.generic)) or (isinstance(obj, jax.Array) and not isinstance(obj, jax.core.Tracer)):
-        a = np.asarray(obj)
-        h.update(f"array{a.dtype.str}{a.shape};".encode())
-        h.update(np.ascontiguousarray(a).tobytes())
+        _array_bytes(h, obj)
         return
     if isinstance(obj, jax.core.Tracer):
         raise _Unkeyable("a traced value")
@@ -175,7 +172,7 @@ def _key(fn, static, treedef, avals) -> str | None:
     h = hashlib.sha256(_environment())
     # the structure of the array arguments (where each one sits); what else the tree's text shows
     # (functions, with their addresses) is hashed by content with the other arguments below
-    h.update(repr((_modes(), _ADDRESS.sub("", str(treedef)), avals)).encode())
+    h.update(repr((_modes(), _ADDR.sub("", str(treedef)), avals)).encode())
     try:
         _update(h, fn, frozenset())
         _update(h, static, frozenset())  # the non-array arguments, modules' static fields included

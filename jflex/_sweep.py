@@ -467,10 +467,12 @@ def _sweep_program(fn, one_item):
     if _hashable(template) and _hashable(values):
         key = _constant_key(template, values)
         if key is not None:
-            if len(_CONSTANT) >= _CONSTANT_SIZE and (template, key) not in _CONSTANT:
-                _CONSTANT.pop(next(iter(_CONSTANT)))
-            constant = _CONSTANT.setdefault((template, key), _flagged_constant(fn))
-            shared, flagged, program = _constant_program(fn), True, constant
+            program = _CONSTANT.get((template, key))
+            if program is None:
+                if len(_CONSTANT) >= _CONSTANT_SIZE:
+                    _CONSTANT.pop(next(iter(_CONSTANT)))
+                program = _CONSTANT[(template, key)] = _flagged_constant(fn)
+            shared, flagged = _constant_program(fn), True
         else:
             shared, flagged = functools.partial(_vmapped, template, values), True
             program = functools.partial(_vmapped_flagged, template, values)
