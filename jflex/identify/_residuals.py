@@ -402,7 +402,12 @@ class TimeData(AbstractData):
             r = simulate(model, tt, x0, xd0, z0 if z0.shape[0] else None, inputs=self.inputs, outputs=want, **kw)
             return r.outputs
 
-        out = jax.vmap(one)(grid, self.x0s, self.xd0s, self.z0s)
+        if S == 1:
+            # one segment: no vmap (batching the solver's while loops retraces their bodies until
+            # the batched carries settle; that was 60 % of the trace, and jacfwd batches it again)
+            out = jax.tree.map(lambda v: v[None], one(grid[0], self.x0s[0], self.xd0s[0], self.z0s[0]))
+        else:
+            out = jax.vmap(one)(grid, self.x0s, self.xd0s, self.z0s)
         pred = {k: out[k][:, :L].reshape((S * L,) + out[k].shape[2:]) for k in names}
         cont = None
         if S > 1:
