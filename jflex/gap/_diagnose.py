@@ -370,7 +370,8 @@ def _jsonable(x):
     return x
 
 
-SCREEN_THREADS = 2  # simulated screenings run side by side in the first round (3 tip springs: 60 -> 47 s on 2 cores)
+SCREEN_THREADS = 3  # simulated screenings run side by side in the first round (3 tip springs on 2 cores: 60 s one
+# at a time, 47 s two at once; later, with smaller programs, 52 s two at once, 46 s three: one traces while others compile)
 
 # [%] of the nominal excess a simulation-screened candidate (a tip-side spring) must close alone, in
 # the first round, to be screened again on the later rounds' models (independent case 38: the

@@ -328,13 +328,14 @@ class FamilyCoefficients:
             h = self.hypers.setdefault(name, np.full(len(self.robot.joint_names), float(fam.meta.hyper[1][2])))
             h[joint] = float(hyper)
 
-    def effects(self) -> list:
-        """Every family of :data:`FAMILIES` as effects with these values (one structure whatever was
-        fitted: one compiled solve), then the extra effects. Coefficients bounded below by zero are
-        clipped there (the bounded fit keeps them >= 0; a last-digit negative would be refused by the laws)."""
+    def effects(self, families=FAMILIES) -> list:
+        """Every family of ``families`` (default :data:`FAMILIES`) as effects with these values (one
+        structure whatever was fitted: one compiled solve), then the extra effects. Coefficients
+        bounded below by zero are clipped there (the bounded fit keeps them >= 0; a last-digit
+        negative would be refused by the laws)."""
         out = []
         n = len(self.robot.joint_names)
-        for name in FAMILIES:
+        for name in families:
             fam = family_of(self.robot, name)
             lo = np.full(fam.spec.size, -np.inf)
             for j in range(n if fam.meta.per_joint else 1):

@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import crba
+from .._fold import fold_kinematics
 from .._simulate import simulate
 from ..effects import FlexibleJoints
 from ..identify import Free, Log, ParameterSpec, TimeData, fit, levenberg_marquardt
@@ -81,9 +82,9 @@ def _model(robot, tfit, springs, rotor, j, k, c, im, b=None):
     return R.simulation_model(robot, tfit, sp, rotor)
 
 
-@eqx.filter_jit
+@fold_kinematics
 def _solve_batch(model, i, slot, ks, cs, ims, ts, x0s, inputs, outputs, bs):
-    def one(k, c, im, x0, b):
+    def one(k, c, im, x0, b, ts):
         fj = model.effects[i]
         m = eqx.tree_at(lambda m: (m.effects[i].stiffness, m.effects[i].damping, m.effects[i].rotor_inertia, m.effects[i].play),
                         model, (fj.stiffness.at[slot].set(k), fj.damping.at[slot].set(c), fj.rotor_inertia.at[slot].set(im),
@@ -91,7 +92,9 @@ def _solve_batch(model, i, slot, ks, cs, ims, ts, x0s, inputs, outputs, bs):
         return simulate(m, ts, x0, inputs=inputs, outputs=outputs, rtol=SCREEN_RTOL, atol=SCREEN_ATOL, max_steps=R.MAX_STEPS,
                         throw=False).outputs
 
-    return jax.vmap(one)(ks, cs, ims, x0s, bs)
+    # the times batched too: the solver's step times then start batched, and vmap's fixed point over
+    # the while loops' carries settles in fewer retracings of their bodies (trace 9.0 -> 6.4 s, the same numbers)
+    return jax.vmap(one)(ks, cs, ims, x0s, bs, jnp.broadcast_to(ts, ks.shape + ts.shape))
 
 
 def _grid_costs(robot, tfit, springs, rotor, j, ks, cs, ims, sets, bs=None) -> np.ndarray:
