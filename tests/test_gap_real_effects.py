@@ -124,6 +124,7 @@ def test_negative_sensor_delay_is_found(tmp_path):
     assert _named(res) == [("sensor_delay", None)]
     assert res["parameters"]["torque"]["sensor_delay"]["delay [s]"] == pytest.approx(-0.012, abs=0.0015)
     assert not res["selected"][0].get("implausible")
+    assert res["torque_scale_suspects"] == []  # torques on their own scale raise no scale alarm
 
 
 def test_a_delay_outside_the_plausible_range_is_reported_not_named(tmp_path):
@@ -131,6 +132,21 @@ def test_a_delay_outside_the_plausible_range_is_reported_not_named(tmp_path):
     assert "sensor_delay" not in [e for e, _ in _named(res)]
     entry = next(e for e in res["ranking"] if e["effect"] == "sensor_delay")
     assert "delay" in entry["implausible"] and "-0.05" in entry["implausible"]
+
+
+def test_a_forgotten_current_scale_is_named_and_no_effect_is(tmp_path):
+    # the log holds motor currents (torque / 8 N m per A, a constant times a gear) read as torques,
+    # with a torque offset planted too: nothing may be named on data off scale
+    res, truth = _diagnose(tmp_path, robot="arm3", effect="torque_offset", logged_gain=0.125)
+    assert res["selected"] == [] and res["verdict"] != "explained"
+    suspects = res["torque_scale_suspects"]
+    assert suspects and {d["dataset"] for d in suspects} == {"traj0", "traj1"}
+    for d in suspects:
+        # the gain maps the nominal fit (whose friction coefficients already shrank to the logged
+        # scale) onto the log: near the true 0.125, not equal to it
+        assert 0.125 / 1.6 < d["gain"] < 0.125 * 1.6
+        assert d["joint"] in res["stop_reason"]
+    assert "off scale" in res["stop_reason"]
 
 
 @pytest.mark.heavy  # a diagnosis each: 25-60 s idle

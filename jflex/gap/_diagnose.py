@@ -38,6 +38,7 @@ from ._selection import (MIN_GAP, MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWA
                          worse_channels)
 from ._frequency_kinds import frequency_kinds
 from ._signatures import indistinguishable_from_inertia, n_params, signature_name, signatures
+from ._torque_scale import scale_reason, torque_scale_suspects
 from ._where import where
 
 @dataclasses.dataclass
@@ -153,6 +154,11 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     tc = sorted([c for c in cands if c in sig], key=lambda c: -sig[c])
     keep = tc[:prune] + [c for c in cands if c not in sig]
     keep_all = list(keep)  # a candidate that changes nothing yet (pb.changes) may in a later round
+    off_scale = torque_scale_suspects(pb, nom)
+    if off_scale:
+        # a gain on the whole torque is no effect of the library: whatever absorbed most of it would be named
+        say(scale_reason(off_scale))
+        keep = keep_all = []
     failed = _failed_solves("nominal", ev0)
 
     def first_round(base):
@@ -308,6 +314,8 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
         reason = ("the noise floor could not be estimated (" + "; ".join(f"{k}: {v}" for k, v in failed_floor.items()) +
                   "): the gap is reported against no floor, and whether it exceeds the noise is unknown"
                   + (f"; {reason}" if reason else ""))
+    if off_scale:
+        reason = scale_reason(off_scale) + (f"; {reason}" if failed_floor else "")
     hidden = _unpredicted(ev0, floor_details)
     if hidden and verdict_ in ("within_noise", "explained"):
         # a channel's floor that is its own residual cannot clear it: say so rather than let the
@@ -318,7 +326,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     wh = where(pb, ev0, floor, case, channel_floor=cfloor)
     moves, inertia_note = _inertia_report(pb, nom)
     result = dict(
-        case=str(case.path), verdict=verdict_, stop_reason=reason, cad_spread=spread,
+        case=str(case.path), verdict=verdict_, stop_reason=reason, cad_spread=spread, torque_scale_suspects=off_scale,
         gap_before=gap0, gap_after=gap_after, noise_floor=fl, noise_floor_upper=floor_high,
         noise_floor_per_dataset=floor, noise_floor_source=floor_source, noise_floor_details=floor_details,
         noise_floor_failed=failed_floor, excess_before=exc0, excess_after=exc_after,
