@@ -30,9 +30,9 @@ def fold_kinematics(fn: Callable) -> Callable:
 
     def call(model, *args, **kwargs):
         robot = model.robot
-        known = {f: np.asarray(getattr(robot, f)) for f in KINEMATICS}
         if any(isinstance(getattr(robot, f), jax.core.Tracer) for f in KINEMATICS):
             return fn(model, *args, **kwargs)  # already inside a trace: nothing to fold
+        known = {f: np.asarray(getattr(robot, f)) for f in KINEMATICS}
         key = (jax.tree_util.tree_structure(robot),) + tuple((a.shape, a.tobytes()) for a in known.values())
         program = programs.get(key)
         if program is None:
