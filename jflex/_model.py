@@ -135,12 +135,6 @@ def _effect_potential(model: Model, x):
     return V
 
 
-def _effect_energy(model: Model, x, xd):
-    """``(T, V)`` of the effects. (A derivative of one of them should call
-    :func:`_effect_kinetic` or :func:`_effect_potential`: the other would be traced for nothing.)"""
-    return _effect_kinetic(model, x, xd), _effect_potential(model, x)
-
-
 def _pad(a, n, nx):
     return jnp.zeros(nx, a.dtype).at[:n].set(a) if nx > n else a
 
@@ -163,10 +157,11 @@ def bias_forces(model: Model, t, x, xd, z):
 
     # Lagrange's terms of the effects' energies: d/dt(dT/dxd) - dT/dx + dV/dx at xdd = 0.
     def dT_dxd(x_):
-        return jax.grad(lambda v: _effect_energy(model, x_, v)[0])(xd)
+        return jax.grad(lambda v: _effect_kinetic(model, x_, v))(xd)
 
     _, dtdt = jax.jvp(dT_dxd, (x,), (xd,))
-    dL = jax.grad(lambda x_: _effect_energy(model, x_, xd)[1] - _effect_energy(model, x_, xd)[0])(x)
+    # (each energy traced once: a derivative of T alone traces no V, and the other way round)
+    dL = jax.grad(lambda x_: _effect_potential(model, x_) - _effect_kinetic(model, x_, xd))(x)
     h = h + dtdt + dL
     for e, s in zip(model.effects, lay.slots):
         h = h - e.generalized_force(r, s, t, x, xd, z)

@@ -17,7 +17,7 @@ import numpy as np
 from ._dynamics import frame_placement, potential_energy
 from ._errors import ShapeError, SolverError
 from ._inputs import AbstractInput, Zero
-from ._model import Model, _effect_energy, initial_state, input_matrix, mass_matrix, model_forward_dynamics
+from ._model import Model, _effect_potential, initial_state, input_matrix, mass_matrix, model_forward_dynamics
 
 
 class Response(eqx.Module):
@@ -41,8 +41,7 @@ def total_energy(model: Model, x, xd):
     r = model.rigid
     n = r.nq
     T = 0.5 * xd @ mass_matrix(model, x) @ xd
-    _, V_eff = _effect_energy(model, x, xd)
-    return T + potential_energy(r, x[:n]) + V_eff
+    return T + potential_energy(r, x[:n]) + _effect_potential(model, x)
 
 
 def nonconservative_force(model: Model, t, x, xd, z, u):

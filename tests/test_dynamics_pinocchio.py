@@ -5,9 +5,11 @@ import os
 
 import numpy as np
 import pytest
+import jax.numpy as jnp
 from hypothesis import given, settings, strategies as st
 
 import jflex
+from jflex._tree import body_placement
 from _references import dh_chain, pin, pin_model_from_robot, random_inertia_params
 
 pytestmark = pytest.mark.skipif(pin is None, reason="needs the test extra 'pin'")
@@ -52,6 +54,10 @@ def compare_all(robot, model, rng, frame=None):
     T = jflex.forward_kinematics(robot, q)
     for i in range(n):
         close(T[i], data.oMi[i + 1].homogeneous)
+        # the array-algebra chain the flexible link differentiates (jflex._tree.body_placement)
+        R, p = body_placement(robot, jnp.asarray(q), i)
+        close(R, data.oMi[i + 1].rotation)
+        close(p, data.oMi[i + 1].translation)
     pin.computeJointJacobians(model, data, q)
     for i in range(n):
         for ref, pref in [("local", pin.LOCAL), ("world", pin.WORLD), ("local_world_aligned", pin.LOCAL_WORLD_ALIGNED)]:

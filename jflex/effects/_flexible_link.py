@@ -65,7 +65,7 @@ import numpy as np
 
 from .._beam import Beam
 from .._errors import ParameterError, ShapeError
-from .._tree import forward_pass
+from .._tree import body_placement
 from ._base import AbstractEffect, Slots
 from ._damping import AbstractDampingLaw
 
@@ -226,9 +226,13 @@ class FlexibleLink(AbstractEffect):
         sa = s + self._shortening(self.hub, s / Lh, eh, Lh)
         return self.root + sa[..., None] * ea + (p @ eh)[..., None] * eb, (d1 @ eh) / Lh
 
-    def _to_world(self, robot, ls, r):
-        b, k = self._body(robot)
-        R, p = ls.oR[b], ls.op[b]
+    def _placement(self, robot, slots, x):
+        """World rotation and position of the body the beam is clamped to."""
+        return body_placement(robot, x[: slots.n], self._body(robot)[0])
+
+    def _to_world(self, robot, placement, r):
+        _, k = self._body(robot)
+        R, p = placement
         if k >= 0:
             p = p + R @ robot.frame_p[k]
             R = R @ robot.frame_R[k]
@@ -236,13 +240,13 @@ class FlexibleLink(AbstractEffect):
 
     def _sample(self, robot, slots, x, labels, hub_s):
         """World positions and rotations of the link points (labels), the tip and the hub points."""
-        ls = forward_pass(robot, x[: slots.n])
+        pl = self._placement(robot, slots, x)
         a = jnp.concatenate([labels, jnp.zeros(1)])  # the tip is the last point
         r, th = self._link_point(robot, slots, x, a)
-        P = self._to_world(robot, ls, r)
+        P = self._to_world(robot, pl, r)
         if self.hub is not None:
             rh, THh = self._hub_point(slots, x, hub_s)
-            Ph = self._to_world(robot, ls, rh)
+            Ph = self._to_world(robot, pl, rh)
         else:
             Ph, THh = jnp.zeros((0, 3)), jnp.zeros(0)
         return P[:-1], th[:-1], P[-1], th[-1], Ph, THh
@@ -261,10 +265,10 @@ class FlexibleLink(AbstractEffect):
             hub_s = jnp.asarray(hx) * self.hub.length
         f = lambda y: self._sample(robot, slots, y, labels, hub_s)
         _, (V, THd, Vt, THdt, Vh, THdh) = jax.jvp(f, (x,), (xd,))
-        b, _ = self._body(robot)
         _, _, en = self._units()
-        ls = forward_pass(robot, x[: slots.n], xd[: slots.n])
-        wn = ls.w[b] @ en  # rotation rate about the bending normal, same in body and world
+        (R, _), (Rd, _) = jax.jvp(lambda y: self._placement(robot, slots, y), (x,), (xd,))
+        W = R.T @ Rd  # [w]x of the body's angular velocity in its own axes
+        wn = jnp.stack([W[2, 1], W[0, 2], W[1, 0]]) @ en  # rotation rate about the bending normal, same in body and world
         bm = self.beam
         w = jnp.asarray(wq)
         T = 0.5 * bm.mass_per_length * l * (w @ jnp.sum(V**2, axis=1))
@@ -386,8 +390,7 @@ class FlexibleLink(AbstractEffect):
         if key == "length":
             return self._length(robot, x)
         if key == "tip_position":
-            ls = forward_pass(robot, x[: slots.n])
-            return self._to_world(robot, ls, self._link_point(robot, slots, x, jnp.zeros(()))[0])
+            return self._to_world(robot, self._placement(robot, slots, x), self._link_point(robot, slots, x, jnp.zeros(()))[0])
         for kind in ("deflection@", "curvature@", "strain@"):
             if key.startswith(kind):
                 try:

@@ -24,7 +24,7 @@ import numpy as np
 from .._dynamics import rnea
 from .._errors import ParameterError
 from .._sweep import flagged_vmap
-from .._model import Model, _effect_energy, initial_state
+from .._model import Model, _effect_kinetic, _effect_potential, initial_state
 from ..identify._fit import Free, ParameterSpec
 from ._torque import TorqueTerm
 
@@ -116,10 +116,10 @@ def effect_forces(model: Model, t, x, xd, xdd, z):
     tau = jnp.zeros_like(xd)
     if r is not model.robot:
         tau = rnea(r, x, xd, xdd) - rnea(model.robot, x, xd, xdd)
-    dT = lambda x_, v: jax.grad(lambda v_: _effect_energy(model, x_, v_)[0])(v)
+    dT = lambda x_, v: jax.grad(lambda v_: _effect_kinetic(model, x_, v_))(v)
     _, a = jax.jvp(lambda v: dT(x, v), (xd,), (xdd,))
     _, b = jax.jvp(lambda x_: dT(x_, xd), (x,), (xd,))
-    dL = jax.grad(lambda x_: _effect_energy(model, x_, xd)[1] - _effect_energy(model, x_, xd)[0])(x)
+    dL = jax.grad(lambda x_: _effect_potential(model, x_) - _effect_kinetic(model, x_, xd))(x)
     tau = tau + a + b + dL
     for e, s in zip(model.effects, model.layout.slots):
         tau = tau - e.generalized_force(r, s, t, x, xd, z)
