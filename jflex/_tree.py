@@ -18,6 +18,7 @@ import numpy as np
 
 from . import _scalar as s
 from ._robot import PRISMATIC, Robot
+from ._spatial import rot_axis_angle
 from ._trig import cos_sin
 
 
@@ -225,9 +226,7 @@ def body_placement(robot: Robot, q, b: int):
         if robot.joint_types[i] == PRISMATIC:
             Ri, pi = Rp, pp + Rp @ (ax * q[i])
         else:
-            K = jnp.cross(jnp.eye(3), ax)  # [a]x: row k is e_k x a, so K @ v = a x v
-            c, sn = jnp.cos(q[i]), jnp.sin(q[i])
-            Ri, pi = Rp @ (jnp.eye(3) + sn * K + (1.0 - c) * (K @ K)), pp
+            Ri, pi = Rp @ rot_axis_angle(ax, q[i]), pp
         R, p = (Ri, pi) if R is None else (R @ Ri, p + R @ pi)
     return R, p
 

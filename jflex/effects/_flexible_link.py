@@ -239,7 +239,8 @@ class FlexibleLink(AbstractEffect):
         return p + r @ R.T
 
     def _sample(self, robot, slots, x, labels, hub_s):
-        """World positions and rotations of the link points (labels), the tip and the hub points."""
+        """World positions and rotations of the link points (labels), the tip and the hub points, and
+        the world rotation of the body the beam is clamped to."""
         pl = self._placement(robot, slots, x)
         a = jnp.concatenate([labels, jnp.zeros(1)])  # the tip is the last point
         r, th = self._link_point(robot, slots, x, a)
@@ -249,7 +250,7 @@ class FlexibleLink(AbstractEffect):
             Ph = self._to_world(robot, pl, rh)
         else:
             Ph, THh = jnp.zeros((0, 3)), jnp.zeros(0)
-        return P[:-1], th[:-1], P[-1], th[-1], Ph, THh
+        return P[:-1], th[:-1], P[-1], th[-1], Ph, THh, pl[0]
 
     # ---- energies -------------------------------------------------------------------------
     def _zero_modes(self, slots, v):
@@ -264,9 +265,9 @@ class FlexibleLink(AbstractEffect):
             hx, hw = self.hub.quadrature()
             hub_s = jnp.asarray(hx) * self.hub.length
         f = lambda y: self._sample(robot, slots, y, labels, hub_s)
-        _, (V, THd, Vt, THdt, Vh, THdh) = jax.jvp(f, (x,), (xd,))
+        # (the clamp body's rotation and its rate come with the points': one JVP of the placement)
+        (*_, R), (V, THd, Vt, THdt, Vh, THdh, Rd) = jax.jvp(f, (x,), (xd,))
         _, _, en = self._units()
-        (R, _), (Rd, _) = jax.jvp(lambda y: self._placement(robot, slots, y), (x,), (xd,))
         W = R.T @ Rd  # [w]x of the body's angular velocity in its own axes
         wn = jnp.stack([W[2, 1], W[0, 2], W[1, 0]]) @ en  # rotation rate about the bending normal, same in body and world
         bm = self.beam
@@ -294,7 +295,7 @@ class FlexibleLink(AbstractEffect):
             hub_s = jnp.asarray(hx) * self.hub.length
             d2h = self.hub.shapes(jnp.asarray(hx))[2]
             V = V + 0.5 * self.hub.EI / self.hub.length**3 * (jnp.asarray(hw) @ (d2h @ eh) ** 2)
-        P, _, Pt, _, Ph, _ = self._sample(robot, slots, x, labels, hub_s)
+        P, _, Pt, _, Ph, _, _ = self._sample(robot, slots, x, labels, hub_s)
         g = robot.gravity
         V = V - self.beam.mass_per_length * l * (w @ (P @ g)) - self.beam.tip_mass * (Pt @ g)
         if self.hub is not None:
