@@ -143,6 +143,36 @@ def test_data_section_lists_left_out_channels_and_conditioning(run):
         assert "resampled 2 % jittered stamps" in text
 
 
+def test_conditioning_is_a_table_of_what_the_data_layer_found_and_did(run):
+    """A record conditioned by the data layer (stamps jittering by 20 % with 3 samples dropped,
+    one dead torque channel, a constant one kept by the user, a spike) reads as one table row per record in
+    both reports: the numbers the stamps gave, the channels' flags and what was done with them,
+    the low-pass cutoff of that record; no Python dict is printed."""
+    from jflex.data._condition import condition_torque
+
+    rng = np.random.default_rng(3)
+    h = 0.002
+    steps = h * (1 + 0.2 * rng.uniform(-1, 1, 1999))
+    steps[500] += 3 * h  # three samples lost
+    t = np.concatenate([[0.0], np.cumsum(steps)])
+    q = np.sin(np.outer(t, [1.0, 2.0, 3.0]))
+    tau = np.column_stack([np.cos(2 * t), np.zeros_like(t), 0.01 * rng.normal(size=t.size)])
+    tau[:, 1][t > 3.5] = 0.2 * np.sin(t[t > 3.5])  # dead 85 % of the time
+    tau[700, 0] += 50.0
+    tau[:, 2] = 0.004  # constant
+    _, _, rep, excluded = condition_torque(t, dict(q=q, tau=tau), ("a", "b", "c"), "rec", keep=("c",))
+    assert excluded == ("b",)
+    proc = {"val": {"cutoff_hz": 12.5, "cutoff_method": "motion_band", "derivatives": "angles filtered, then differentiated twice"}}
+    md, page = _rewritten(run, conditioning={"val": rep}, processing=proc)
+    for text in (md, page):
+        assert "{'" not in text.split("conditioning")[1][:3000]  # no dict printed
+        assert re.search(r"jitter 2\d %, 3 dropped", text), text[:200]
+        assert "resampled (" in text
+        assert "b: dead (left out)" in text and "c: flat, few levels (kept by the user)" in text
+        assert re.search(r"a: [12] \(flagged\)", text)  # one sample, two once resampled
+        assert "12.5 (motion band)" in text
+
+
 def test_payload_shown_once_with_units_in_markdown(run):
     md = (run / "report.md").read_text()
     assert "m cx [kg m]" not in md  # the link-frame first moments are not a second payload

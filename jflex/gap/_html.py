@@ -75,16 +75,82 @@ def floor_sentence(r: dict) -> str:
 
 def data_notes(r: dict) -> list[str]:
     """Sentences on the data: the channels left out of the gap and why, and what the data
-    conditioning did to each record."""
+    conditioning did to each record beyond :func:`conditioning_table` (a merge of several files,
+    a time window, a conditioning the table does not know)."""
     out = []
     for k, chans in (r.get("excluded_channels") or {}).items():
         out.append(f"Left out of the gap in '{k}': " + "; ".join(f"{c} ({w})" for c, w in chans.items()) + ".")
     for k, cond in (r.get("conditioning") or {}).items():
         if isinstance(cond, dict) and cond:
-            out.append(f"Conditioning of '{k}': " + "; ".join(f"{a}: {_short(b)}" for a, b in cond.items()) + ".")
+            rest = {a: b for a, b in cond.items() if not (_TABULATED.get(a, lambda v: False)(b) and _tabulated(cond))}
+            if "merge" in rest and isinstance(rest["merge"], dict):
+                m = rest.pop("merge")
+                out.append(f"'{k}' merged from {', '.join(map(str, m.get('files', [])))}: {m.get('merged', '')}.")
+            if "window_s" in rest:
+                w = rest.pop("window_s")
+                out.append(f"'{k}' cut to the window {w[0]:g}-{w[1]:g} s.")
+            if rest:
+                out.append(f"Conditioning of '{k}': " + "; ".join(f"{a}: {_short(b)}" for a, b in rest.items()) + ".")
         elif cond:
             out.append(f"Conditioning of '{k}': {_short(cond)}.")
     return out
+
+
+# the conditioning report's parts that conditioning_table shows (a record's dict holding its
+# "sampling" and "channels" dicts is tabulated; anything else stays a sentence)
+_TABULATED = {"sampling": lambda v: isinstance(v, dict), "channels": lambda v: isinstance(v, dict),
+              "spikes": lambda v: isinstance(v, dict), "excluded": lambda v: isinstance(v, (list, tuple)),
+              "derivatives": lambda v: isinstance(v, str)}
+_DERIVATIVES = {"given": "velocities and accelerations given", "none": "from the angles",
+                "velocity": "velocities given; accelerations from them, filtered"}
+CONDITIONING_HEAD = ("record", "rate [Hz]", "time stamps", "torque channels", "spikes", "derivatives", "low-pass [Hz]")
+
+
+def _tabulated(cond) -> bool:
+    return isinstance(cond, dict) and isinstance(cond.get("sampling"), dict) and isinstance(cond.get("channels"), dict)
+
+
+def _stamps(s: dict) -> str:
+    j = float(s.get("jitter_pct", 0.0))
+    parts = [f"jitter {j:.2g} %" if j >= 0.01 else "uniform"]
+    for key, words in (("dropped_samples", "dropped"), ("repeated_stamps", "repeated stamps"),
+                       ("repeated_rows", "stale rows")):
+        if s.get(key):
+            parts.append(f"{s[key]} {words}")
+    if s.get("resampled"):
+        parts.append(f"resampled ({s.get('samples_in', '?')} -> {s.get('samples_out', '?')} samples)"
+                     if "samples_in" in s else "resampled")
+    return ", ".join(parts)
+
+
+def _channel_flags(cond: dict) -> str:
+    bad = []
+    for j, q in cond["channels"].items():
+        flags = [f for f in (q or {}).get("flags", []) if f != "spikes"]
+        if flags:
+            how = "kept by the user" if q.get("kept_by_user") else "left out" if j in cond.get("excluded", ()) else "kept"
+            bad.append(f"{j}: {', '.join(f.replace('_', ' ') for f in flags)} ({how})")
+    return "; ".join(bad) if bad else f"all {len(cond['channels'])} pass"
+
+
+def conditioning_table(r: dict) -> list[tuple]:
+    """One row per record the data layer conditioned (:data:`CONDITIONING_HEAD`): its rate, what
+    was found in its stamps and done about it, the torque channels flagged (dead, stuck, flat,
+    saturated, few levels) and whether they were left out, spikes, where the derivatives came from,
+    and the low-pass cutoff the record's own spectrum gave (with the method)."""
+    rows = []
+    proc = r.get("processing") or {}
+    for k, cond in (r.get("conditioning") or {}).items():
+        if not _tabulated(cond):
+            continue
+        s = cond["sampling"]
+        spikes = "; ".join(f"{j}: {v.get('count')} ({v.get('action')})" for j, v in (cond.get("spikes") or {}).items()) or "-"
+        p = proc.get(k) or {}
+        der = p.get("derivatives") or _DERIVATIVES.get(cond.get("derivatives"), str(cond.get("derivatives", "-")))
+        cut = p.get("cutoff_hz")
+        lowpass = "-" if cut is None else f"{cut:.3g} ({str(p.get('cutoff_method', '?')).replace('_', ' ')})"
+        rows.append((k, f"{s.get('rate_hz', float('nan')):.4g}", _stamps(s), _channel_flags(cond), spikes, der, lowpass))
+    return rows
 
 
 def _short(x, n=160) -> str:
@@ -271,10 +337,13 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
              "significant.</p>")
     if payload:
         H.append(f"<p><b>{_e(payload_line(payload)).capitalize()}.</b></p>")
-    notes = data_notes(r)
-    if notes:
+    notes, ctab = data_notes(r), conditioning_table(r)
+    if notes or ctab:
         sec("data")
-        H.append("<ul>" + "".join(f"<li>{_e(x)}</li>" for x in notes) + "</ul>")
+        if ctab:
+            H.append(_table(CONDITIONING_HEAD, [[_e(c) for c in row] for row in ctab]))
+        if notes:
+            H.append("<ul>" + "".join(f"<li>{_e(x)}</li>" for x in notes) + "</ul>")
     if r.get("vetoed"):
         H.append("<p>Candidates never named: " + "; ".join(
             f"{_e(v['candidate'])} ({_e(v['reason'])})" for v in r["vetoed"][:10]) + ".</p>")

@@ -186,9 +186,13 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     fs = _html.floor_sentence(r)
     if fs:
         L += [fs, ""]
-    notes = _html.data_notes(r)
-    if notes:
-        L += ["## The data: channels left out and conditioning", ""] + [f"- {x}" for x in notes] + [""]
+    notes, ctab = _html.data_notes(r), _html.conditioning_table(r)
+    if notes or ctab:
+        L += ["## The data: channels left out and conditioning", ""]
+        if ctab:
+            L += ["| " + " | ".join(_html.CONDITIONING_HEAD) + " |", "|" + "---|" * len(_html.CONDITIONING_HEAD)]
+            L += ["| " + " | ".join(str(c).replace("|", "/") for c in row) + " |" for row in ctab] + [""]
+        L += [f"- {x}" for x in notes] + ([""] if notes else [])
     verdict = r.get("verdict")
     if verdict:
         L.append(f"**Verdict: {verdict.replace('_', ' ')}.** {r.get('stop_reason', '')}.")
