@@ -40,7 +40,8 @@ def planted_torque(effect, p, q, qd, qdd):
 def make(folder, robot="ur5", effect=None, size=0.15, seed=0, delay=0.0, T=3.0, fs=250.0, logged_gain=1.0):
     """A case folder with ``effect`` planted at ``size`` x the joint's torque spread (``delay`` [s]:
     the torque channel lags the angles, negative: leads them; ``logged_gain``: what the log holds is
-    the torque times this, a motor current whose scale the case forgets). Returns ``(folder, truth)``."""
+    the torque times this, a motor current whose scale the case forgets, or one per joint: torque
+    constants off). Returns ``(folder, truth)``."""
     rng = np.random.default_rng(seed)
     true, tool, home = R.true_model(robot)
     nom, _ = R.cad_error(true, rng)
@@ -74,10 +75,11 @@ def make(folder, robot="ur5", effect=None, size=0.15, seed=0, delay=0.0, T=3.0, 
         tau = TQ.rnea_batch(true, qa, qda, qdda) + Fv * qda + Fc * np.tanh(qda / WIDTH) + planted_torque(effect, p, qa, qda, qdda)
         tau = tau + S.ar1_noise(rng, tau.shape, 0.7, 0.01 * tau.std(axis=0))
         datasets.append(("torque", f"traj{i}", "train" if i < 2 else "validation",
-                         dict(t=t, q=S.quantise(tr(t), 2 * np.pi / 2**19), tau=logged_gain * tau)))
+                         dict(t=t, q=S.quantise(tr(t), 2 * np.pi / 2**19), tau=np.asarray(logged_gain, float) * tau)))
     names = [true.names[k + 1] for k in range(n)]
     coulomb = [names[k] for k in range(n) if Fc[k] > 0]
     nominal = [dict(effect="viscous_friction", joint="all"),
                dict(effect="coulomb_friction", joint="all" if len(coulomb) == n else coulomb)]
-    truth = dict(effect=effect, params=p, delay=delay, joint_names=names, torque_std=scale.tolist())
+    truth = dict(effect=effect, params=p, delay=delay, joint_names=names, torque_std=scale.tolist(),
+                 logged_gain=np.broadcast_to(np.asarray(logged_gain, float), (n,)).tolist())
     return C._write(folder, nom, tool, robot, nominal, datasets, truth), truth

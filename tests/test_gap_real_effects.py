@@ -97,6 +97,10 @@ def test_builtin_candidates_carry_plausible_ranges():
     assert TT.make_term("coulomb_friction", 0).implausible(np.array([0.9 * lim]), [s]) is None
     assert "Fc [N m] = 5" in TT.make_term("coulomb_friction", 0).implausible(np.array([5.0]), [s])
     assert "negative" in TT.make_term("asymmetric_coulomb", 1).implausible(np.array([0.1, 5.0]), [s])
+    # a torque read 1.8 x (a gain no drive has; the data's scale check starts at 3 x)
+    assert "drive gain - 1 = 0.8 lies outside the plausible range [-0.3, 0.3]" in TT.make_term("drive_gain", 1).implausible(
+        np.array([0.8]), [s])
+    assert TT.make_term("drive_gain", 1).implausible(np.array([-0.07]), [s]) is None
 
 
 def test_shift_of_either_sign_against_the_closed_form():
@@ -147,6 +151,15 @@ def test_a_forgotten_current_scale_is_named_and_no_effect_is(tmp_path):
         assert 0.125 / 1.6 < d["gain"] < 0.125 * 1.6
         assert d["joint"] in res["stop_reason"]
     assert "off scale" in res["stop_reason"]
+
+
+def test_a_torque_constant_a_few_per_cent_off_is_named_as_a_drive_gain(tmp_path):
+    # joint 2's torque is logged 7 % high (a data-sheet torque constant off): nothing else is planted
+    res, truth = _diagnose(tmp_path, robot="arm3", logged_gain=[1.0, 1.07, 1.0])
+    assert _named(res) == [("drive_gain", truth["joint_names"][1])]
+    assert res["verdict"] == "explained"
+    # only the gain relative to the other joints shows (the inertias are refitted): still about 7 %
+    assert res["parameters"]["torque"][f"drive_gain@{truth['joint_names'][1]}"]["gain - 1"] == pytest.approx(0.07, abs=0.02)
 
 
 @pytest.mark.heavy  # a diagnosis each: 25-60 s idle

@@ -1,9 +1,10 @@
 """Measured torques on the wrong scale: a unit or a current-to-torque constant left out of a case.
 
 A motor-current column read as torque (its scale forgotten), a gear ratio missing or a unit
-mistaken multiplies a joint's measured torque by a constant. No effect of the library is a
-constant gain on the whole torque, so the forward selection would name whichever candidate
-absorbs most of it (a torque offset closing a 5316 % gap to 951 %). The check: the gain that
+mistaken multiplies a joint's measured torque by a constant. The library's drive gain
+(``drive_gain``: a torque constant or a gear's efficiency off) stops at tens of per cent, so the
+forward selection would name whichever candidate absorbs most of a larger one (a torque offset
+closing a 5316 % gap to 951 %). The check: the gain that
 best maps the nominal model's torque onto the measured one, per loaded joint; a gain far from 1
 that alone closes most of that joint's misfit is a scale error of the data, named before any
 effect is.

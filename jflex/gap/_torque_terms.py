@@ -27,7 +27,8 @@ from .._sweep import flagged_vmap
 from ..identify._signal import motion_band, zero_phase_lowpass
 from ..effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
 from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
-from ._torque import CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, on_rows, predict, term_columns
+from ._torque import (CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, on_rows, predict, term_columns,
+                      weighted_inertia_columns)
 
 # [s] grid of sensor delays, of either sign: the torque lagging the angles (d > 0), or the encoders
 # lagging the torque (d < 0: a position read by a slower bus, or stamped at the end of a cycle)
@@ -430,6 +431,56 @@ class SensorDelay(TorqueTerm):
         return (np.gradient(predict(fit, s), s.t, axis=0))[:, :, None]
 
 
+# --- a drive's gain ----------------------------------------------------------------------------------
+GAIN_PLAUSIBLE = 0.3  # |gain - 1|: a data-sheet torque constant, a gear's efficiency, a gauge's calibration
+# are off by per cents to tens of per cents; a torque several times off is a scale error of the data
+# (:mod:`._torque_scale`), not a drive
+
+
+@dataclasses.dataclass(frozen=True)
+class DriveGain(TorqueTerm):
+    """The torque read at ``joint`` is ``1 + gamma`` times what the joint transmits: a motor
+    current converted with a data-sheet torque constant, a gear whose efficiency the ratio leaves
+    out, a torque sensor's calibration (the joint drive gains of M. Gautier and S. Briot, "Global
+    identification of joint drive gains and dynamic parameters of robots"). Column: the nominal
+    model's rigid torque at the joint, coefficient ``gamma``. With the inertial parameters refitted
+    only a gain relative to the other joints shows (every torque times one factor is a scaled
+    robot); a known mass on the robot fixes the absolute one."""
+
+    joint: int
+    hyper: None = None
+    effect: ClassVar[str] = "drive_gain"
+    signature: ClassVar[str] = "the joint's torque larger or smaller by a constant factor"
+
+    def param_names(self):
+        return ["gain - 1"]
+
+    def bounds(self):
+        return [-np.inf], [np.inf]
+
+    def columns(self, s):
+        out = np.zeros(s.q.shape + (1,))
+        out[:, self.joint, 0] = s.F0[:, self.joint]
+        return out
+
+    def signature_columns(self, s, fit):
+        # the column is the model's own torque, most of which the inertial refit absorbs (a heavier
+        # link raises it too): what a residual can show of a gain is the part no inertial change makes
+        col = term_columns(self, s)
+        if fit is None or fit.delta is None:
+            return col
+        ok = np.isfinite(s.scale)
+        w = np.where(ok, 1.0 / np.where(ok, s.scale, 1.0), 0.0)
+        Yw, _ = weighted_inertia_columns(s)
+        x = (col[:, :, 0] * w[None, :]).ravel()
+        perp = x - Yw @ np.linalg.lstsq(Yw, x, rcond=1e-10)[0]
+        return (perp.reshape(col.shape[:2]) * np.where(ok, s.scale, 0.0)[None, :])[:, :, None]
+
+    def implausible(self, theta, sets):
+        return out_of_range("drive gain - 1", float(theta[0]), -GAIN_PLAUSIBLE, GAIN_PLAUSIBLE, "",
+                            "a torque constant or a gear's efficiency is off by tens of per cents at most")
+
+
 # --- the table ---------------------------------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class Kind:
@@ -473,6 +524,7 @@ KINDS["sensor_delay"] = Kind(lambda joint, hyper: SensorDelay(None, 0.0 if hyper
                              per_joint=False, signature=SensorDelay.signature)
 # counted as the joint's stiffness and damping, as on the frequency side (one candidate, one count)
 KINDS["joint_flexibility"] = Kind(lambda joint, hyper: CompliantJoint(joint), 2, signature=CompliantJoint.signature)
+KINDS["drive_gain"] = Kind(lambda joint, hyper: DriveGain(joint), 1, signature=DriveGain.signature)
 
 
 def make_term(name: str, joint=None, hyper=None) -> TorqueTerm:
