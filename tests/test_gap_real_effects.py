@@ -162,6 +162,32 @@ def test_a_torque_constant_a_few_per_cent_off_is_named_as_a_drive_gain(tmp_path)
     assert res["parameters"]["torque"][f"drive_gain@{truth['joint_names'][1]}"]["gain - 1"] == pytest.approx(0.07, abs=0.02)
 
 
+def test_a_torque_the_log_leaves_out_is_told_from_a_scale_only_where_the_data_can():
+    # joint b's model torque is 150 N m of gravity with a 2 N m ripple; its log reads the ripple
+    # alone (a torso whose drive reads only what its counterbalance leaves): a gain near 0 and an
+    # offset of -150 N m both match, and the reason names both. Joint a's log is the model's x 10
+    # (a gear ratio forgotten): a gain, and no offset matches.
+    from jflex.gap._torque_scale import scale_reason, torque_scale_suspects
+    import types
+
+    t = np.linspace(0, 10, 2001)
+    ripple = 2.0 * np.sin(2 * np.pi * 0.3 * t)
+    F0 = np.stack([100.0 * np.sin(2 * np.pi * 0.2 * t), 150.0 + ripple], axis=1)
+    tau = np.stack([10.0 * F0[:, 0], ripple + 0.01 * np.cos(7 * t)], axis=1)
+    q = np.zeros((t.size, 2))
+    s = T.TorqueSet(name="s", t=t, q=q, qd=q, qdd=q, tau=tau, F0=F0, scale=tau.std(axis=0), Y=np.zeros((t.size, 2, 20)),
+                    q_extra=np.zeros((t.size, 0)), extra_joints=(), robot=_two_joint_robot())
+    pb = types.SimpleNamespace(ttrain=[s], n=2, names=("a", "b"))
+    state = types.SimpleNamespace(tfit=T.TorqueFit(terms=(), delay=0.0, theta=np.zeros(0), cost=0.0))
+    sus = {d["joint"]: d for d in torque_scale_suspects(pb, state)}
+    assert sus["a"]["gain"] == pytest.approx(10.0, rel=1e-6)
+    assert sus["b"]["gain"] < 1 / 3 and sus["b"]["offset"] == pytest.approx(-150.0, abs=0.5)
+    why = scale_reason(list(sus.values()))
+    assert "a in s (10 x the model)" in why and "b in s (" in why and "150 N m below it" in why
+    assert "torque_offset" in why
+    assert "torque_offset" not in scale_reason([sus["a"]])
+
+
 @pytest.mark.heavy  # a diagnosis each: 25-60 s idle
 @pytest.mark.parametrize("effect", ["torque_offset", "asymmetric_coulomb"])
 def test_planted_joint_effect_is_found_and_named(tmp_path, effect):

@@ -4,6 +4,7 @@ marked, and the payload as a mass and a centre of mass in the tool frame, checke
 demo case's hidden truth."""
 
 import base64
+import html
 import json
 import pathlib
 import re
@@ -163,6 +164,7 @@ def test_conditioning_is_a_table_of_what_the_data_layer_found_and_did(run):
     _, _, rep, excluded = condition_torque(t, dict(q=q, tau=tau), ("a", "b", "c"), "rec", keep=("c",))
     assert excluded == ("b",)
     proc = {"val": {"cutoff_hz": 12.5, "cutoff_method": "motion_band", "derivatives": "angles filtered, then differentiated twice"}}
+    rep["window_s"] = [12.5, None]  # the held-out end of a run: to the end of the record
     md, page = _rewritten(run, conditioning={"val": rep}, processing=proc)
     for text in (md, page):
         assert "{'" not in text.split("conditioning")[1][:3000]  # no dict printed
@@ -171,6 +173,7 @@ def test_conditioning_is_a_table_of_what_the_data_layer_found_and_did(run):
         assert "b: dead (left out)" in text and "c: flat, few levels (kept by the user)" in text
         assert re.search(r"a: [12] \(flagged\)", text)  # one sample, two once resampled
         assert "12.5 (motion band)" in text
+        assert "'val' cut to the window from 12.5 s to the end of the record." in html.unescape(text)
 
 
 def test_payload_shown_once_with_units_in_markdown(run):

@@ -88,7 +88,9 @@ def data_notes(r: dict) -> list[str]:
                 out.append(f"'{k}' merged from {', '.join(map(str, m.get('files', [])))}: {m.get('merged', '')}.")
             if "window_s" in rest:
                 w = rest.pop("window_s")
-                out.append(f"'{k}' cut to the window {w[0]:g}-{w[1]:g} s.")
+                a, b = (list(w) + [None, None])[:2]
+                out.append(f"'{k}' cut to the window from {a or 0:g} s to "
+                           + ("the end of the record." if b is None else f"{b:g} s."))
             if rest:
                 out.append(f"Conditioning of '{k}': " + "; ".join(f"{a}: {_short(b)}" for a, b in rest.items()) + ".")
         elif cond:

@@ -23,10 +23,13 @@ LOADED = 0.05  # joints carrying at least this share of the model's torque energ
 
 
 def torque_scale_suspects(pb, state) -> list[dict]:
-    """``[{dataset, joint, gain, misfit, misfit_after_gain}]``: torque training sets' loaded joints
-    (at least :data:`LOADED` of the predicted energy) whose measured torque is best matched by
-    the model's times a gain beyond [1/:data:`GAIN_LIMIT`, :data:`GAIN_LIMIT`] that closes at
-    least 1 - :data:`CLOSES` of the misfit (relative RMS, of the measured torque's RMS)."""
+    """``[{dataset, joint, gain, misfit, misfit_after_gain, offset, misfit_after_offset}]``: torque
+    training sets' loaded joints (at least :data:`LOADED` of the predicted energy) whose measured
+    torque is best matched by the model's times a gain beyond [1/:data:`GAIN_LIMIT`,
+    :data:`GAIN_LIMIT`] that closes at least 1 - :data:`CLOSES` of the misfit (relative RMS, of the
+    measured torque's RMS); ``offset`` [N m] is the constant that, added to the model's torque
+    instead, matches it best, and ``misfit_after_offset`` what it leaves (:func:`scale_reason` names
+    the better of the two)."""
     out = []
     for s in pb.ttrain:
         pred = T.predict(state.tfit, s)
@@ -43,13 +46,31 @@ def torque_scale_suspects(pb, state) -> list[dict]:
             before = float(np.sqrt(np.mean((y - p) ** 2))) / norm
             after = float(np.sqrt(np.mean((y - gain * p) ** 2))) / norm
             if (gain > GAIN_LIMIT or gain < 1.0 / GAIN_LIMIT) and after <= CLOSES * before:
-                out.append(dict(dataset=s.name, joint=pb.names[j], gain=gain, misfit=before, misfit_after_gain=after))
+                # a constant missing from the log (a current's zero, a counterbalance the model does
+                # not hold, gravity on a torso whose drive reads only the rest) also maps the model
+                # onto it by a gain near 0: say which of the two fits
+                c = float(np.mean(y - p))
+                after_offset = float(np.sqrt(np.mean((y - p - c) ** 2))) / norm
+                out.append(dict(dataset=s.name, joint=pb.names[j], gain=gain, misfit=before, misfit_after_gain=after,
+                                offset=c, misfit_after_offset=after_offset))
     return out
+
+
+def _offset_fits(d: dict) -> bool:
+    """Whether a constant added to the model's torque also closes the joint's misfit (on a joint
+    whose model torque hardly varies, gravity on a torso, the two cannot be told apart)."""
+    return d.get("offset") is not None and d["misfit_after_offset"] <= CLOSES * d["misfit"]
 
 
 def scale_reason(suspects: list[dict]) -> str:
     """The stop reason for a case whose torques look off scale."""
-    joints = ", ".join(f"{d['joint']} in {d['dataset']} ({d['gain']:.3g} x)" for d in suspects)
-    return ("the measured torques look off scale: the model's torque times a constant matches them far better "
-            f"than the model itself ({joints}); a unit, a gear ratio or a current-to-torque constant (case.yaml: "
-            "the torque columns' scale) is likely wrong, and no effect is named until it is fixed")
+    def one(d):
+        alt = f", or {abs(d['offset']):.4g} N m {'below' if d['offset'] < 0 else 'above'} it" if _offset_fits(d) else ""
+        return f"{d['joint']} in {d['dataset']} ({d['gain']:.3g} x the model{alt})"
+
+    why = "a unit, a gear ratio or a current-to-torque constant is likely wrong (case.yaml: the torque columns' scale)"
+    if any(_offset_fits(d) for d in suspects):
+        why += (", or the log leaves out a constant torque (a current's zero; gravity that a counterbalance or the "
+                "drive's own controller carries; case.yaml: torque_offset)")
+    return (f"the measured torques look off scale: the model's torque times a constant matches them far better than the "
+            f"model itself ({', '.join(one(d) for d in suspects)}); {why}, and no effect is named until it is fixed")
