@@ -70,6 +70,9 @@ class _PlainBar:
     def set_postfix_str(self, s="", refresh=True):
         self.postfix = str(s)
 
+    def set_description_str(self, desc=None, refresh=True):
+        self.label = str(desc or "")
+
     def write(self, s, file=None):
         _say(str(s))
 
@@ -89,7 +92,7 @@ class _PlainBar:
 def bar(total: int, label: str, progress=True, unit: str = "it"):
     """A bar on stderr over ``total`` items named ``label``: tqdm's on a terminal, plain lines
     otherwise, nothing when ``progress`` is off. Use as a context manager; ``update(n)``,
-    ``set_postfix_str(s)``, ``write(s)``."""
+    ``set_postfix_str(s)``, ``set_description_str(s)`` (a new label), ``write(s)``."""
     if plain(progress):
         return _PlainBar(total, label, unit)
     from tqdm import tqdm

@@ -146,3 +146,18 @@ def _run_bar(_progress, n):
     with _progress.bar(n, "loop", True) as b:
         for _ in range(n):
             b.update(1)
+
+
+def test_a_bar_takes_a_new_label_on_a_terminal_and_in_a_log(monkeypatch):
+    # a bench names the case it is on: in a log (CI, | tee) the plain bar raised AttributeError
+    from jflex import _progress
+
+    def run():
+        with _progress.bar(2, "bench", True, unit="case") as b:
+            for name in ("case-a", "case-b"):
+                b.set_description_str(f"bench {name}")
+                b.update()
+
+    for stream in (_Log(), _Terminal()):
+        _, err = _run_with(stream, monkeypatch, run)
+        assert "bench case-b" in err
