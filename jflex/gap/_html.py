@@ -82,7 +82,8 @@ def data_notes(r: dict) -> list[str]:
         out.append(f"Left out of the gap in '{k}': " + "; ".join(f"{c} ({w})" for c, w in chans.items()) + ".")
     for k, cond in (r.get("conditioning") or {}).items():
         if isinstance(cond, dict) and cond:
-            rest = {a: b for a, b in cond.items() if not (_TABULATED.get(a, lambda v: False)(b) and _tabulated(cond))}
+            tab = _tabulated(cond)
+            rest = {a: b for a, b in cond.items() if not (tab and a in _TABULATED and _TABULATED[a](b))}
             if "merge" in rest and isinstance(rest["merge"], dict):
                 m = rest.pop("merge")
                 out.append(f"'{k}' merged from {', '.join(map(str, m.get('files', [])))}: {m.get('merged', '')}.")

@@ -404,6 +404,7 @@ def black_box_noise(s, resid, m, seed: int = 0):
     # the noise. Every model's held-out error bounds the noise from above: each channel takes the
     # tightest
     errs = [held_out(c) for c in models]
+    rigid_at = -1  # where the per-channel models' errors sit in errs (-1: no such model)
     Y = getattr(s, "Y", None)
     if Y is not None and nb + Y.shape[2] <= N // 8:
         # the per-joint terms with the channel's own rigid-body regressor row: an inertial error
@@ -412,16 +413,18 @@ def black_box_noise(s, resid, m, seed: int = 0):
         # 4 x its noise with a 7 % mass error)
         # through the set's parallel filter: the copy the inertial refit made and keeps with the set
         Yf = _filtered(s, "Y") if hasattr(s, "cache") else Y
+        rigid_at = len(errs)
         errs.append(per_channel_errors(lambda j: Yf[:, j, :]))
-    per_channel = list(range(len(models), len(errs) + 1))  # the rigid-body rows (if any), then the history terms
     # the per-joint terms with the joint's motion through plays of a few widths (the displacement a
     # play leaves and its rates): a residual that depends on the motion's history (gear play, a
     # hysteresis: which side of a gap the teeth are on) is no function of the present motion, and
     # the smooth features kept it as noise (a 3-joint arm's play: floor 32.3 % against a 31.8 % gap)
+    history_at = len(errs)
     errs.append(per_channel_errors(lambda j: _history_terms(s, j)))
     rms = np.stack([np.sqrt(np.mean(e**2, axis=0)) for e in errs])
-    for k in per_channel:  # channels left out of the gap hold no per-channel model's error
-        rms[k, ~np.asarray(m, bool)] = np.inf
+    for k in (rigid_at, history_at):  # channels left out of the gap hold no per-channel model's error
+        if k >= 0:
+            rms[k, ~np.asarray(m, bool)] = np.inf
     pick = np.argmin(rms, axis=0)
     err = np.stack([errs[pick[j]][:, j] for j in range(n)], axis=1)
     sig = rms[pick, np.arange(n)]
@@ -435,8 +438,8 @@ def black_box_noise(s, resid, m, seed: int = 0):
                           unpredicted=unpredicted,
                           harmonics=Ks, base_only=[int(j) for j in np.flatnonzero((pick == 1) & mk)],
                           angle_series=[int(j) for j in np.flatnonzero((pick >= 2) & (pick < len(models)) & mk)],
-                          rigid_body=[int(j) for j in np.flatnonzero((pick == len(models)) & (len(errs) > len(models) + 1) & mk)],
-                          history=[int(j) for j in np.flatnonzero((pick == len(errs) - 1) & mk)])
+                          rigid_body=[int(j) for j in np.flatnonzero((pick == rigid_at) & mk)],
+                          history=[int(j) for j in np.flatnonzero((pick == history_at) & mk)])
 
 
 # [rad] half-widths of the plays the history terms pass each angle through: fine enough that one
