@@ -215,3 +215,61 @@ def test_a_rival_that_closes_what_the_selected_effect_left_takes_its_place(shape
     else:
         assert exc_before == 0 or 100 * (1 - np.sqrt(shape_left) / exc_before) < MIN_STEP_SHRINK
         assert new is sel and swaps == []
+
+
+@pytest.mark.parametrize("rich_gap, neff, rich_named", [(1.0, 1000.0, True), (1.75, 1000.0, False), (1.0, 20.0, False)])
+def test_a_richer_nested_effect_is_named_when_the_held_out_criterion_says_so(rich_gap, neff, rich_named):
+    # The floor (2.0) is an upper bound twice the noise: the simpler effect (held-out gap 1.8) and
+    # the richer one that contains it (rich_gap) both close 100 % of the excess. The simpler one
+    # wins unless the richer one's held-out criterion is decisively better (many samples and a
+    # clearly lower gap); a near tie or thin evidence keeps the simpler name.
+    from jflex.gap._selection import rank_entries, simpler_holds
+
+    floor = {"v": 2.0}
+    gaps = {(): 4.0, ("simple",): 1.8, ("rich",): rich_gap}
+    ev = lambda added: {"v": {"nrmse": gaps[tuple(added)], "neff": neff}}
+    refit = lambda state, c: ((c,), ev((c,)))
+    sel = forward_select((), ev(()), floor, ["simple", "rich"], refit, n_params=lambda c: 1 if c == "simple" else 3,
+                         max_effects=1, simpler=lambda rich, simple: (rich, simple) == ("rich", "simple"),
+                         min_first_shrink=MIN_NAMED_SHRINK)
+    assert [s.cand for s in sel.steps] == (["rich"] if rich_named else ["simple"])
+    assert all(s.step_shrink == pytest.approx(100.0) for s in sel.steps)
+    # the first-round ranking follows the same rule
+    entries = [dict(effect=e, joint="j", shrink=100.0, score=-1000.0) for e in ("stribeck_friction", "coulomb_friction")]
+    scores = {e: float(neff * np.log(16.0 / g**2) - p * np.log(neff)) for e, g, p in
+              (("coulomb_friction", 1.8, 1), ("stribeck_friction", rich_gap, 3))}
+    for e in entries:
+        e["score"] = scores[e["effect"]]
+    first = entries[rank_entries(entries)[0]]["effect"]
+    assert first == ("stribeck_friction" if rich_named else "coulomb_friction")
+    assert simpler_holds(100.0, scores["coulomb_friction"], 100.0, scores["stribeck_friction"]) is (not rich_named)
+
+
+@pytest.mark.parametrize("rich_left, floor, swapped", [(0.0, 1.0, True), (0.0, 1.5, True), (0.9, 1.0, False)])
+def test_a_richer_nested_law_takes_the_place_of_the_simpler_beside_the_others(rich_left, floor, swapped):
+    # alone, Stribeck friction is too close to Coulomb friction to call (the simpler is named);
+    # beside the sensor delay also selected, the richer law's held-out criterion is decisively
+    # better (rich_left 0) and it takes the place, also when the floor (1.5, an upper bound above
+    # the noise) leaves no excess to close; barely better (0.9), it does not
+    from jflex.gap._selection import swap_rivals
+
+    F = frozenset
+    left = {F(): 40.0, F({"coulomb"}): 13.0, F({"stribeck"}): 12.9, F({"delay"}): 27.0, F({"coulomb", "stribeck"}): 12.9,
+            F({"coulomb", "delay"}): 1.0, F({"stribeck", "delay"}): rich_left}
+    ev, refit = _table_problem(left)
+    fl = {"v": floor}
+    n_params = {"coulomb": 1, "stribeck": 3, "delay": 1}.get
+    simpler = lambda rich, simple: (rich, simple) == ("stribeck", "coulomb")  # noqa: E731
+    sel = forward_select((), ev(()), fl, ["coulomb", "stribeck", "delay"], refit, n_params=n_params, max_effects=2,
+                         simpler=simpler, min_first_shrink=MIN_NAMED_SHRINK)
+    assert [s.cand for s in sel.steps] == ["coulomb", "delay"]
+    rivals = lambda c: ["stribeck"] if c == "coulomb" else []  # noqa: E731
+    new, swaps = swap_rivals(sel, ev(()), fl, rivals, refit, n_params=n_params, richer=simpler)
+    if swapped:
+        assert [s.cand for s in new.steps] == ["stribeck", "delay"] and swaps[0][:2] == ("coulomb", "stribeck")
+    else:
+        assert new is sel and swaps == []
+    if floor > 1.0:
+        # no excess left: without the nesting declared, the selection stands
+        plain, none = swap_rivals(sel, ev(()), fl, rivals, refit, n_params=n_params)
+        assert plain is sel and none == []

@@ -265,16 +265,21 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                              for st in sel.steps):
         # a rival that alone closed nearly as much may hold the data's shape beside the other
         # effects (rebuilt with plain refits: a spring identified through the simulation is not)
+        def richer(k, c):
+            return NESTED.get(k.effect) == c.effect and k.joint == c.joint
+
         def rivals(c):
-            # (a nested pair was already judged by the parsimony rule)
-            return [k for k in keep if k != c and k.joint == c.joint and k.effect != c.effect
-                    and NESTED.get(k.effect) != c.effect and NESTED.get(c.effect) != k.effect
-                    and k.effect != "joint_flexibility" and not pb.screened_by_simulation(nom, k)
-                    and abs(alone.get(k, -1e9) - alone.get(c, 1e9)) < SWAP_SHRINK][:2]
+            # the richer law containing a selected one is tried beside the others (alone, the
+            # parsimony rule judged the pair); a simpler one never replaces the richer
+            nested = [k for k in keep if richer(k, c)]
+            return nested + [k for k in keep if k != c and k.joint == c.joint and k.effect != c.effect
+                             and NESTED.get(k.effect) != c.effect and NESTED.get(c.effect) != k.effect
+                             and k.effect != "joint_flexibility" and not pb.screened_by_simulation(nom, k)
+                             and abs(alone.get(k, -1e9) - alone.get(c, 1e9)) < SWAP_SHRINK][:2]
 
         sel, swaps = swap_rivals(sel, ev0, floor, rivals, refit,
                                  n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain), pb),
-                                 channel_floor=cfloor, implausible=lambda c, st: _implausible(pb, c, st))
+                                 channel_floor=cfloor, implausible=lambda c, st: _implausible(pb, c, st), richer=richer)
         for old_c, new_c, e0, e1 in swaps:
             say(f"{new_c.label(pb.names)} takes the place of {old_c.label(pb.names)}: excess {e0:.2f} -> {e1:.2f} %")
     selected = []

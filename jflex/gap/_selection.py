@@ -144,9 +144,19 @@ NESTED = {"stribeck_friction": "coulomb_friction"}  # complex -> the simpler eff
 PARSIMONY = 5.0  # [%] a nested simpler effect within this shrink of the richer one ranks first
 
 
+def simpler_holds(shrink_simple, score_simple, shrink_rich, score_rich) -> bool:
+    """Whether a simpler nested effect wins over the richer one at the same place: it closes
+    nearly as much of the excess (within PARSIMONY points) and the richer one's held-out criterion
+    is not better by DECISIVE_SCORE. The shrink is capped at the floor: with a floor above the
+    noise (an upper bound) both close 100 % though the richer one's held-out gap may be half the
+    simpler's; the criterion (each channel's effective sample count, so coloured noise does not
+    count as evidence) still tells them apart."""
+    return shrink_simple >= shrink_rich - PARSIMONY and score_rich - score_simple < DECISIVE_SCORE
+
+
 def rank_entries(entries) -> list[int]:
     """Order by the held-out shrink, then the criterion; a simpler nested effect at the same place
-    that closes nearly as much (within PARSIMONY points of shrink) goes first."""
+    that closes nearly as much (:func:`simpler_holds`) goes first."""
     # the held-out gap closed decides (rounded to a point, so noise-level differences tie), the
     # information criterion breaks ties
     order = sorted(range(len(entries)), key=lambda i: (-round(entries[i]["shrink"]), -entries[i]["score"]))
@@ -160,7 +170,7 @@ def rank_entries(entries) -> list[int]:
                 continue
             for b in range(a + 1, len(order)):
                 eb = entries[order[b]]
-                if eb["effect"] == simple and eb["joint"] == ea["joint"] and eb["shrink"] >= ea["shrink"] - PARSIMONY:
+                if eb["effect"] == simple and eb["joint"] == ea["joint"] and simpler_holds(eb["shrink"], eb["score"], ea["shrink"], ea["score"]):
                     order.insert(a, order.pop(b))
                     changed = True
                     break
@@ -217,7 +227,8 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
       data and evaluated on validation data (the caller caches where it can).
     - ``n_params(cand)``: parameters the candidate adds (the criterion's penalty).
     - ``simpler(rich, simple) -> bool``: optional; a simpler effect nested in a richer one at the
-      same place wins when it closes within ``PARSIMONY`` points of it.
+      same place wins when it closes within ``PARSIMONY`` points of it and the richer one is not
+      decisively better on the held-out criterion (:func:`simpler_holds`).
     - ``first``: optional ``{cand: (state, ev)}`` of first-round refits already made.
     - ``on_select(step)``: optional callback after each selected step.
     - ``min_first_shrink``: the first effect must close at least this % of the excess to be taken
@@ -290,9 +301,9 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
             key = (round(step_shrink), score)
             if simpler is not None and best is not None:
-                if simpler(best[1].cand, c) and step_shrink >= best[1].step_shrink - PARSIMONY:
+                if simpler(best[1].cand, c) and simpler_holds(step_shrink, score, best[1].step_shrink, best[1].score):
                     key = (best[0][0], best[0][1] + 1e-9, 1)  # the simpler nested effect wins a near tie
-                elif simpler(c, best[1].cand) and best[1].step_shrink >= step_shrink - PARSIMONY:
+                elif simpler(c, best[1].cand) and simpler_holds(best[1].step_shrink, best[1].score, step_shrink, score):
                     key = (-np.inf, -np.inf)
             if best is None or key > best[0]:
                 best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink), state))
@@ -351,7 +362,7 @@ SWAP_SHRINK = 5.0  # [%] alone, an effect at the same place within this of a sel
 
 
 def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_params, channel_floor=None,
-                implausible=None) -> tuple[Selection, list]:
+                implausible=None, richer=None) -> tuple[Selection, list]:
     """Each selected effect is tried against its rivals (``rivals(cand) -> list``: effects at the
     same place that alone closed nearly as much) inside the final model: the model is rebuilt from
     the nominal one with the rival in the effect's place and the other effects as selected, and
@@ -359,13 +370,19 @@ def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_para
     joint made worse beyond its floor and a plausible fit. Alone, two effects can close the same
     share (a constant offset and a spring over a small range of a joint's angle); beside the
     others, the one that holds the data's shape closes what the other leaves. Returns the
-    selection (steps rebuilt in order) and ``[(replaced, by, excess before, excess after)]``."""
+    selection (steps rebuilt in order) and ``[(replaced, by, excess before, excess after)]``.
+
+    ``richer(alt, cand) -> bool`` (optional): ``alt`` contains ``cand`` (Stribeck friction contains
+    Coulomb friction). Such a rival takes the place when, beside the others, its held-out criterion
+    beats the selection's by DECISIVE_SCORE: a richer law that alone was too close to call (the
+    parsimony rule kept the simpler) may be clear once the other effects are in."""
     swaps = []
     for i in range(len(sel.steps)):
         cands = [st.cand for st in sel.steps]
         _, _, exc_cur = gap_summary(sel.ev, floor)
-        if exc_cur <= 0:  # nothing left to close: the selection stands
-            break
+        nested = [] if richer is None else [a for a in rivals(cands[i]) if richer(a, cands[i])]
+        if exc_cur <= 0 and not nested:  # nothing left to close: the selection stands
+            continue
         best = None
         for alt in rivals(cands[i]):
             if alt in cands:
@@ -384,7 +401,11 @@ def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_para
             if not ok or worse_channels(ev, sel.ev, channel_floor):
                 continue
             _, _, exc = gap_summary(ev, floor)
-            if exc < (1 - MIN_STEP_SHRINK / 100) * exc_cur and (best is None or exc < best[0]):
+            if alt in nested:
+                closes = -ic_delta(ev, sel.ev, n_params(alt) - n_params(cands[i])) >= DECISIVE_SCORE
+            else:
+                closes = exc < (1 - MIN_STEP_SHRINK / 100) * exc_cur
+            if closes and (best is None or exc < best[0]):
                 best = (exc, alt, chain)
         if best is not None:
             swaps.append((cands[i], best[1], exc_cur, best[0]))
