@@ -106,6 +106,9 @@ def test_report_speaks_words_and_names_what_it_means(run):
     # the floor's method and interval, per validation set, in both reports
     for k, d in diag["noise_floor_details"].items():
         assert d["method"] in md and not d["failed"]
+        # the black box's per-channel models name their channels as the rest of the file does
+        for key in ("base_only", "angle_series", "rigid_body", "history", "unpredicted"):
+            assert all(isinstance(c, str) for c in d.get(key, [])), (key, d.get(key))
     # an effect of no joint in an ambiguous pair: no literal "(None)"
     md, page = _rewritten(run, ambiguous=[dict(effects=["sensor_delay", "viscous_friction"], joints=[None, "j2"],
                                                known_pair=True, shrink=[60.0, 58.0])])

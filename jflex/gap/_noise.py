@@ -83,7 +83,7 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
                                  f"{', linear drift cancelled' if info['drift_cancelled'] else ''})")
                 else:
                     sig, dof, info = black_box_noise(s, r["resid"] * s.scale, m)
-                    for k in ("base_only", "angle_series", "rigid_body", "unpredicted"):
+                    for k in ("base_only", "angle_series", "rigid_body", "history", "unpredicted"):
                         info[k] = [problem.names[j] for j in info[k]]
                     src[name] = "black-box split-half cross-validation (upper bound)"
             out[name], info = _pooled(sig, dof, s.scale, m, problem.names, info)
