@@ -203,7 +203,7 @@ def scan_play(robot, tfit, springs: dict, rotor, j: int, sets) -> list:
     return [(float(k0 * F[b]), float(c0 * np.sqrt(F[b])), im, float(B[b]))]
 
 
-_WHERE: dict = {}  # accessors of the free leaves, one object each (part of the compiled fit's key)
+_WHERE: dict = {}  # accessors of the free leaves, one object per leaf: specs of the same leaves compare equal
 
 
 def _where(kind, i):
@@ -219,7 +219,9 @@ def polish_spring(robot, tfit, springs: dict, rotor, j: int, starts, sets) -> tu
     Levenberg-Marquardt with exact forward-mode Jacobians in log k, log c (and log I_m when the
     case does not state it), each record's motor start angle free (the spring's static preload
     moves with k). Returns ``(k, c, I_m)``, or the first start when a record cannot be compared whole.
-    The starts share one compiled residual and Jacobian (same structure, same free leaves).
+    Each identification compiles its own residual and Jacobian (:func:`jflex.identify.fit`
+    keeps none across calls), so a second basin costs a second compilation: it is tried only
+    when its screened cost is within OTHER_BASIN of the first's result.
     Starts ``(k, c, I_m, b)`` (:func:`scan_play`): a spring with play, ``log b`` free too; returns
     ``(k, c, I_m, b)``."""
     first = _polish_one(robot, tfit, springs, rotor, j, starts[0], sets)
