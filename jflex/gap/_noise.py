@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import _frequency_model as L
-from ._torque import _filtered
+from ._torque import _filtered, _product
 
 if TYPE_CHECKING:
     from ._case import Case
@@ -456,10 +456,7 @@ def _history_terms(s, j: int) -> np.ndarray:
     it with the posture; a play at one joint loads the others through the inertia matrix)."""
     from ._torque_terms import link_lag_column, play
 
-    key = "history_terms"
-    cache = getattr(s, "cache", None)
-    cache = {} if cache is None else cache
-    if key not in cache:
+    def make():
         q = np.asarray(s.q, float)
         h = float(np.mean(np.diff(s.t)))
         moving = [k for k in range(q.shape[1]) if np.ptp(q[:, k]) > 1e-9]
@@ -474,8 +471,9 @@ def _history_terms(s, j: int) -> np.ndarray:
         lp = s.lp if hasattr(s, "lp") else (lambda X: X)
         L_ = lp(np.stack(lagged, axis=2).reshape(q.shape[0], -1)).reshape(q.shape + (len(lagged),)) if lagged \
             else np.zeros(q.shape + (0,))
-        cache[key] = ({k: lp(np.stack(v, axis=1)) for k, v in own.items()}, L_)
-    own, L_ = cache[key]
+        return {k: lp(np.stack(v, axis=1)) for k, v in own.items()}, L_
+
+    own, L_ = _product(s, "history_terms", make) if hasattr(s, "cache") else make()
     return np.concatenate([own.get(j, np.zeros((L_.shape[0], 0))), L_[:, j, :]], axis=1)
 
 

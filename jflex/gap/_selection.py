@@ -380,11 +380,12 @@ def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_para
     for i in range(len(sel.steps)):
         cands = [st.cand for st in sel.steps]
         _, _, exc_cur = gap_summary(sel.ev, floor)
-        nested = [] if richer is None else [a for a in rivals(cands[i]) if richer(a, cands[i])]
+        alts = rivals(cands[i])
+        nested = [] if richer is None else [a for a in alts if richer(a, cands[i])]
         if exc_cur <= 0 and not nested:  # nothing left to close: the selection stands
             continue
         best = None
-        for alt in rivals(cands[i]):
+        for alt in alts:
             if alt in cands:
                 continue
             chain, state, ev, ok = [], None, None, True
