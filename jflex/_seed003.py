@@ -190,16 +190,35 @@ class Seed003Robot:
 
     def fit_common_ratio(self, posture: int = 0, bounds=(20.0, 600.0), hold="actuated", n_grid: int = 601):
         """One gear ratio for all joints reproducing the thesis' Model frequencies at ``posture``:
-        the best of a log-spaced grid (one compiled sweep). Returns (r, rms relative error)."""
-        from .linear import modal_analysis
+        the best of a log-spaced grid (one compiled sweep). Returns (r, rms relative error).
+
+        The rotors take ``r^2 I_m`` out of the identified inertias psi_1 and psi_2 (:meth:`model`),
+        so past some ratio the links are left a mass matrix that is not positive definite: no
+        physical model, and a ratio of the grid only where the links keep one. A
+        :class:`jflex.ParameterError` if no ratio within ``bounds`` does."""
+        import jax.numpy as jnp
+
+        from ._errors import ParameterError
+        from .linear import linearization, modes
+        from .linear._common import mass_ok
 
         target = np.sort(self.thesis["frequency_model_Hz"][posture])
         q = self.postures[posture]
         grid = np.exp(np.linspace(np.log(bounds[0]), np.log(bounds[1]), n_grid))
-        f = sweep(lambda r: modal_analysis(self.model(r * np.ones(3)), q, hold=hold).frequency,
-                  grid, chunk_size=n_grid, progress=False)
+
+        def frequencies(r):
+            # modes() rather than modal_analysis(), which refuses (inside the sweep: raises for
+            # the whole grid) the ratios whose links are left without a positive definite M
+            _, lin = linearization(self.model(r * jnp.ones(3)), q, hold)
+            return modes(lin.M, lin.C, lin.K).frequency, mass_ok(lin.M)
+
+        f, ok = sweep(frequencies, grid, chunk_size=n_grid, progress=False)
         err = np.sqrt(np.mean(((np.sort(f, axis=1) - target) / target) ** 2, axis=1))
-        err[~np.isfinite(err)] = np.inf
+        err[~(np.asarray(ok) & np.isfinite(err))] = np.inf
+        if not np.isfinite(err).any():
+            raise ParameterError(
+                f"{self.name}.gear_ratios.bounds: no common ratio within {list(bounds)} leaves the links a positive "
+                f"definite mass matrix at configuration {posture + 1} (the rotors' r^2 I_m exceeds the identified inertia)")
         k = int(np.argmin(err))
         return float(grid[k]), float(err[k])
 
