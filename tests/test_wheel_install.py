@@ -4,7 +4,8 @@ staubli_tx200`` and the experiments find them.
 
 The wheel is built from a copy of the checkout (``pip wheel --no-build-isolation``, offline) and
 installed with ``--no-deps --no-index`` into a fresh venv that sees this interpreter's packages
-(``--system-site-packages``) for jflex's dependencies. Every command runs with its working
+for jflex's dependencies (:func:`_venv_seeing_these_packages`: also when pytest itself runs in a
+venv, whose packages ``--system-site-packages`` would not show). Every command runs with its working
 directory in a temporary folder, and the test checks that the venv's ``jflex`` is the installed
 one, not this checkout's."""
 
@@ -48,6 +49,30 @@ def _copy_source(dst: pathlib.Path) -> pathlib.Path:
     return dst
 
 
+def _venv_seeing_these_packages(env_dir: pathlib.Path, cwd) -> None:
+    """A venv at ``env_dir`` that sees the packages of the interpreter running the tests.
+
+    ``python -m venv --system-site-packages`` run from a venv builds on that venv's base
+    interpreter and shows the base's packages, not the venv's (where a user's jax is): so a .pth
+    in the new venv adds each site folder of this interpreter with ``site.addsitedir`` (the
+    folders' own .pth files included, e.g. where cmeel puts Pinocchio). They come after the new
+    venv's own site-packages, so the jflex installed there is the one imported."""
+    import site
+    import sysconfig
+
+    # no pip of its own (ensurepip is slow): the pip it sees through this interpreter's packages
+    # installs into it
+    _run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip", str(env_dir)], cwd=cwd)
+    dirs = list(site.getsitepackages())
+    if site.ENABLE_USER_SITE and os.path.isdir(site.getusersitepackages()):
+        dirs.append(site.getusersitepackages())
+    py = env_dir / "bin" / "python"
+    purelib = _run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], cwd=cwd).stdout.strip()
+    assert purelib != sysconfig.get_paths()["purelib"], "the new venv is this interpreter's own environment"
+    pathlib.Path(purelib, "_jflex_test_parent_env.pth").write_text(
+        "import site; " + "; ".join(f"site.addsitedir({d!r})" for d in dirs) + "\n")
+
+
 @pytest.fixture(scope="module")
 def venv(tmp_path_factory):
     if not _can_build_wheel():
@@ -58,8 +83,7 @@ def venv(tmp_path_factory):
           "-w", str(base / "dist"), str(src)], cwd=base)
     (wheel,) = (base / "dist").glob("jflex-*.whl")
     env_dir = base / "venv"
-    # no pip of its own (ensurepip is slow): the system pip it sees installs into the venv
-    _run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip", str(env_dir)], cwd=base)
+    _venv_seeing_these_packages(env_dir, cwd=base)
     py = env_dir / "bin" / "python"
     _run([str(py), "-m", "pip", "install", "--no-deps", "--no-index", "-q", str(wheel)], cwd=base)
     assert (env_dir / "bin" / "jflex").is_file()
@@ -90,7 +114,7 @@ def test_installed_jflex_is_not_the_checkout(venv):
     res = _run([str(py), "-c", code], cwd=work, check=False)
     out = res.stdout.split("\n")
     installed = pathlib.Path(out[0]).resolve()
-    assert ROOT not in installed.parents and "site-packages" in installed.parts, installed
+    assert ROOT not in installed.parents and "site-packages" in installed.parts, (installed, res.stderr[-2000:])
     for line in out[1:3]:
         assert line and ROOT not in pathlib.Path(line).resolve().parents and installed.parent in pathlib.Path(line).parents, out
     assert res.returncode == 2 and "no experiment scripts found" in res.stderr, (res.returncode, res.stderr)
