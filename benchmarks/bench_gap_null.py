@@ -146,11 +146,18 @@ def write_results(text: str, path: pathlib.Path = RESULTS_MD) -> None:
 
 
 def _commit(src: str | None) -> str:
+    """The commit of the jflex diagnosed: the repository's HEAD (uncommitted edits not included), or
+    the name of ``--jflex-src`` when that is no git work tree (e.g. ``jflex-<commit>``, a ``git archive``)."""
+    path = pathlib.Path(src).resolve() if src else HERE
     try:
-        return subprocess.run(["git", "-C", str(pathlib.Path(src or HERE)), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True).stdout.strip() or "unknown"
+        out = subprocess.run(["git", "-C", str(path), "rev-parse", "--show-toplevel", "--short", "HEAD"],
+                             capture_output=True, text=True)
     except OSError:
-        return "unknown"
+        out = None
+    lines = out.stdout.split() if out is not None and out.returncode == 0 else []
+    if len(lines) == 2 and (src is None or pathlib.Path(lines[0]).resolve() == path):
+        return lines[1]
+    return path.name if src else "unknown"
 
 
 def main(argv=None):

@@ -16,7 +16,8 @@ combined per case (``TRAITS``, one value each):
 ``hum``         50 Hz mains hum on every torque channel (0.5-1.5 % of its torque std) or none
 ``stamps``      ``uniform`` or ``jitter`` (a CSV whose stamps jitter by 20 % of the step, with dropped
                 samples, repeated and stale rows: reallog's :func:`jittered_stamps`)
-``clip``        one channel clipped at a limit (a drive limit set per run) for 1-4 % of its samples
+``clip``        one channel's logged values clipped at a limit set per run, for 1-4 % of its samples (a
+                sensor's or logger's range: the robot got the full torque)
 ``loop``        ``open`` (the robot follows the reference) or ``closed`` (reallog's PID with CAD
                 feed-forward: the logged torque is the command, the logged angles the plant's)
 ``excitation``  ``aperiodic`` (a Fourier series whose period exceeds the record) or ``periodic``
@@ -203,9 +204,9 @@ def make_null_case(folder, spec: dict) -> tuple[pathlib.Path, dict]:
             rec["x"] = RL.current_from_torque(K, k_t, rec["x"], i0)
         recs.append(rec)
 
-    # the clipped channel's limit is set per run (a drive's current or torque limit), at the share
-    # of that run's samples it cuts; the converter's end code is the limit there, elsewhere one full
-    # scale per channel over the session
+    # the clipped channel's range is set per run, at the share of that run's samples it cuts (only the
+    # log is clipped); the converter's end code is that limit, elsewhere one full scale per channel
+    # over the session
     allx = np.concatenate([r["x"] for r in recs])
     fsc = ADC_HEADROOM * np.abs(allx).max(axis=0)
     limits, adc_step = [], None
