@@ -237,6 +237,20 @@ def _parse_tree(root, fname):
     roots = [k for k in links if k not in parent_of]
     if len(roots) != 1:
         raise URDFError(f"{fname}: expected exactly one root link, found {roots or 'none (a cycle)'}")
+    # every link has one parent, so a link not below the root lies on (or hangs from) a cycle of
+    # joints; the walk from the root would drop it, and its joints, without a word
+    reached, stack = {roots[0]}, [roots[0]]
+    while stack:
+        for j in children[stack.pop()]:
+            c = j.find("child").get("link")
+            if c not in reached:
+                reached.add(c)
+                stack.append(c)
+    cut = [k for k in links if k not in reached]
+    if cut:
+        lost = [j.get("name") for j in root.findall("joint") if j.find("child").get("link") in cut]
+        raise URDFError(f"{fname}: links {cut} are not reached from the root link '{roots[0]}' (their joints {lost} "
+                        "form a cycle); expected a tree: every link below the root through one chain of joints")
     # urdfdom keeps joints in a map sorted by name, so Pinocchio visits a link's children in the
     # order of their joint names (not file order); the joint order of the model follows.
     for lst in children.values():

@@ -153,6 +153,7 @@ def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
                 raise ConfigError(f"{case_file}: field '{fld}.{key}.{c}': column {c!r} is not mapped in columns "
                                   f"(mapped: {sorted(mapped)})")
     time_col = cols.time if spec.kind != "modal" else None
+    rate = getattr(spec, "rate", None)  # a log without a time column: row k at k / rate seconds
 
     def raw(tb, c, finite=True):
         v = (tb.column(c) - offset.get(c, 0.0)) * scale.get(c, 1.0)
@@ -167,17 +168,24 @@ def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
         vals = {c: raw(tables[0], c, c not in finite_ok) for c in mapped}
         merge_report = None
     else:
-        if time_col is None:
+        if time_col is None and rate is None:
             raise ConfigError(f"{case_file}: field '{fld}.file': a {spec.kind} data set is one file")
         parts = []
         for tb in tables:
+            if time_col is None:
+                own = {c: raw(tb, c) for c in mapped if c in tb.header}
+                parts.append((tb.path.name, np.arange(len(tb.rows)) / rate, own))
+                continue
             if time_col not in tb.header:
                 raise ConfigError(f"{case_file}: field '{fld}.columns.time': column {time_col!r} is not in "
                                   f"{tb.path.name}: every file of a merged data set holds the time column")
             own = {c: raw(tb, c) for c in mapped if c in tb.header and c != time_col}
             parts.append((tb.path.name, raw(tb, time_col) * TIME_UNITS[time_unit], own))
         t_m, vals, merge_report = merge_on_time(parts, f"{case_file}: {fld}")
-        vals[time_col] = t_m / TIME_UNITS[time_unit]
+        if time_col is None:
+            t_rows = t_m
+        else:
+            vals[time_col] = t_m / TIME_UNITS[time_unit]
 
     def col(c, factor=1.0):
         return vals[c] * factor
@@ -203,7 +211,10 @@ def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
         out = yaml_posture(spec, robot, case_file, fld, ang)
         out.update(freq=col(cols.frequency), zeta=col(cols.damping_ratio))
         return Record(out, channels, conditioning)
-    t = col(time_col, TIME_UNITS[time_unit])
+    if time_col is None:
+        t = np.arange(len(tables[0].rows)) / rate if len(tables) == 1 else t_rows
+    else:
+        t = col(time_col, TIME_UNITS[time_unit])
     if spec.kind == "torque":
         pk = list(cols.position)
         missing = [j for j in names if j not in pk]

@@ -503,14 +503,25 @@ def _nominal(specs, robot, file) -> list[dict]:
     return nominal
 
 
+MIN_WINDOW_SAMPLES = 20  # a torque record shorter than this is refused (see _torque)
+
+
+def window_mask(t, window) -> np.ndarray:
+    """The samples of the stamps ``t`` inside ``window`` = [start, end] seconds from the first
+    stamp (``end`` None: to the end); ``jflex case init --hold-out`` checks its split with it."""
+    t = np.asarray(t, float)
+    start, end = window
+    rel = t - t[0]
+    return (rel >= start) & (rel <= (np.inf if end is None else end))
+
+
 def _window(arrs: dict, window, path, fld: str, case_file) -> dict:
     """The samples of a time record (``t`` and every array with a time axis: the first one, the
     second one of ``*_repeats``) inside ``window`` = [start, end] seconds from its first stamp."""
     t = np.asarray(arrs["t"], float)
-    start, end = window
     rel = t - t[0]
-    keep = (rel >= start) & (rel <= (np.inf if end is None else end))
-    if keep.sum() < 20:
+    keep = window_mask(t, window)
+    if keep.sum() < MIN_WINDOW_SAMPLES:
         raise _err(case_file, f"{fld}.window", f"{list(window)} s keeps {int(keep.sum())} samples of {path.name} "
                    f"(its record lasts {rel[-1]:.4g} s): expected a window inside the record with at least 20")
     out = {}

@@ -104,41 +104,112 @@ def _copy_robot(robot: str, folder: pathlib.Path, local) -> str:
     return local(rpath)
 
 
-def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: float | None = None) -> pathlib.Path:
-    """Write ``case.yaml`` for the CSV ``log`` (or a list of CSV logs of one run: positions,
-    velocities, efforts, each with the time column, merged on time by the loader) and the robot
-    ``robot`` (a URDF / robot YAML file or a config name) into ``out`` (default: the first log's
-    folder), copying the logs and every file the robot needs there when they lie elsewhere (a
-    robot YAML and the URDF it names). When the logs drive only some of a URDF robot's joints,
+NOMINAL_FRICTION = [{"effect": "viscous_friction", "joint": "all"}, {"effect": "coulomb_friction", "joint": "all"}]
+
+
+class _Dumper(yaml.SafeDumper):
+    """A YAML writer without anchors: the training and validation sets share one column map in
+    memory, and ``&id001`` / ``*id001`` would make an edit of one silently edit the other."""
+
+    def ignore_aliases(self, data):
+        return True
+
+
+def _stamps(tb, time_col, time_unit, rate):
+    """The stamps [s] of the table ``tb``: its time column, or row k at k / ``rate``."""
+    if time_col is None:
+        return np.arange(len(tb.rows)) / rate
+    tt = tb.column(time_col) * {"ms": 1e-3, "us": 1e-6, "ns": 1e-9}.get(time_unit, 1.0)
+    return tt[np.isfinite(tt)]
+
+
+def _split(tt, hold_out, name) -> float:
+    """The training window's end [s from the first stamp] that holds out the last ``hold_out`` of the
+    record ``tt``; refused by the rule load_case applies to a window (it keeps at least
+    ``MIN_WINDOW_SAMPLES`` samples), so a case init writes is not refused when it is loaded."""
+    from ._case import MIN_WINDOW_SAMPLES, window_mask
+
+    span = float(tt.max() - tt.min())
+    split_s = float(round((1.0 - float(hold_out)) * span, 6))
+    kept = {w: int(window_mask(tt, win).sum()) for w, win in (("training", [0.0, split_s]),
+                                                                   ("validation", [split_s, None]))}
+    short = {w: k for w, k in kept.items() if k < MIN_WINDOW_SAMPLES}
+    if short:
+        lo = (MIN_WINDOW_SAMPLES - 1) / max(tt.size - 1, 1)
+        raise ConfigError(
+            f"field 'hold_out': {hold_out:g} leaves " + " and ".join(f"{k} samples for {w}" for w, k in short.items())
+            + f" in {name} ({tt.size} samples over {span:.4g} s): expected a fraction that keeps at least "
+            f"{MIN_WINDOW_SAMPLES} samples on each side (about {lo:.2g} to {1 - lo:.2g} here)")
+    return split_s
+
+
+def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: float | None = None,
+              rate: float | None = None) -> pathlib.Path:
+    """Write ``case.yaml`` for the CSV ``log`` (or a list of CSV logs) and the robot ``robot`` (a
+    URDF / robot YAML file or a config name) into ``out`` (default: the first log's folder),
+    copying the logs and every file the robot needs there when they lie elsewhere (a robot YAML
+    and the URDF it names). Several logs with different headers are files of one run (positions,
+    velocities, efforts, each with the time column), merged on time by the loader; several logs
+    with the same header are separate runs, each its own data set (the last one the validation
+    set unless ``hold_out`` splits each). When the logs drive only some of a URDF robot's joints,
     the case reduces the robot to them (``robot: {file, joints}``). A motor-current column gets
     ``scale: TODO``, which :func:`jflex.gap.load_case` refuses until the torque constant is filled
-    in. Refuses to overwrite a case.yaml.
+    in. The nominal model gets viscous and Coulomb friction at every joint (``nominal_effects``,
+    fitted on the training data): a real joint has both, and without them the friction of every
+    joint at once is left to the candidates, which name one effect at one joint at a time. Refuses
+    to overwrite a case.yaml.
 
-    ``hold_out``: a fraction in (0, 1): the log's last ``hold_out`` of its duration becomes the
+    ``hold_out``: a fraction in (0, 1): each log's last ``hold_out`` of its duration becomes the
     validation set and the rest the training set (two data sets on the same files with a time
     ``window`` each), so a single run gives a complete case; default: one training set, and the
-    case names the validation set it still needs.
+    case names the validation set it still needs. Each window must keep at least 20 samples, as
+    :func:`jflex.gap.load_case` requires.
+
+    ``rate``: the sample rate [Hz] of logs without a time column (row k at k / rate s).
 
     **Returns:** the path of the written case.yaml.
     """
     logs = [pathlib.Path(p) for p in (log if isinstance(log, (list, tuple)) else [log])]
     if not logs:
-        raise ConfigError("jflex case init: no CSV log given")
+        raise ConfigError("field 'log': no CSV log given")
+    if hold_out is not None:
+        h = hold_out
+        if isinstance(h, bool) or not isinstance(h, (int, float)) or not 0.0 < float(h) < 1.0:
+            raise ConfigError(f"field 'hold_out': expected a fraction in (0, 1) (the part of the log held out for "
+                              f"validation), got {hold_out!r}")
+    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float)) or not np.isfinite(rate)
+                             or rate <= 0):
+        raise ConfigError(f"field 'rate': expected a sample rate > 0 [Hz], got {rate!r}")
     folder = pathlib.Path(out) if out is not None else logs[0].parent
-    folder.mkdir(parents=True, exist_ok=True)
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{folder}: field 'out': exists and is not a folder (expected the case folder to write "
+                          "case.yaml into, new or existing)")
     target = folder / "case.yaml"
     if target.exists():
         raise ConfigError(f"{target}: exists already (jflex case init does not overwrite a case)")
     rob = load_robot(robot)
     joints = list(rob.joint_names)
     tables = [Table(p) for p in logs]
-    header = [h for tb in tables for h in tb.header]
+    runs = len(tables) > 1 and all(tb.header == tables[0].header for tb in tables)
+    header = list(tables[0].header) if runs else [h for tb in tables for h in tb.header]
     g = guess_columns(header, joints)
-    if len(tables) > 1 and g["time"] is not None:
+    if rate is not None and g["time"] is not None:
+        raise ConfigError(f"field 'rate': the log has a time column ({g['time']!r}); rate is for logs without one")
+    if len(tables) > 1 and not runs and g["time"] is not None:
         lacking = [p.name for p, tb in zip(logs, tables) if g["time"] not in tb.header]
         if lacking:
-            raise ConfigError(f"jflex case init: the time column {g['time']!r} is not in {lacking}: logs merged on "
+            raise ConfigError(f"field 'log': the time column {g['time']!r} is not in {lacking}: logs merged on "
                               "time each hold it")
+    if hold_out is not None and g["time"] is None and rate is None:
+        raise ConfigError("field 'hold_out': needs the time column, which could not be guessed (or the sample "
+                          "rate: --rate HZ)")
+    # each log's split, checked before anything is written
+    splits = None if hold_out is None else [
+        min(_split(_stamps(tb, g["time"], g["units"].get("time", "s"), rate), float(hold_out), tb.path.name)
+            for tb in group)
+        for group in ([[tb] for tb in tables] if runs else
+                      [[tb for tb in tables if g["time"] is None or g["time"] in tb.header]])]
+    folder.mkdir(parents=True, exist_ok=True)
 
     def local(p: pathlib.Path) -> str:
         if p.resolve().parent != folder.resolve():
@@ -161,46 +232,63 @@ def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: 
                 todo.append(f"columns.{role}.{j}")
         return m
 
-    columns = {"time": g["time"] or f"{TODO}: time column", "position": per_joint("position", "angle"),
-               "torque": per_joint("torque", "torque or motor current")}
-    if g["time"] is None:
-        todo.append("columns.time")
+    columns = {"position": per_joint("position", "angle"), "torque": per_joint("torque", "torque or motor current")}
+    if rate is None:
+        columns = {"time": g["time"] or f"{TODO}: time column (or give the sample rate: rate: HZ)", **columns}
+        if g["time"] is None:
+            todo.append("columns.time (or rate: the sample rate [Hz] of a log without a time column; --rate)")
     if all(j in g["velocity"] for j in joints):
         columns["velocity"] = {j: g["velocity"][j] for j in joints}
     files = [local(p) for p in logs]
     entry = {"kind": "torque", "file": files[0] if len(files) == 1 else files, "split": "train", "columns": columns}
+    if rate is not None:
+        entry["rate"] = float(rate)
     currents = [c for c in g["current"] if c in columns["torque"].values()]
     if currents:
         entry["scale"] = {c: f"{TODO}: torque constant [N m/A] x gear ratio" for c in currents}
         todo.append("scale (torque constant [N m/A] x gear ratio of each motor current column; the case is refused "
                     "until it is filled in)")
     entry["units"] = {"time": g["units"].get("time", "s"), "position": g["units"].get("position", "rad")}
-    datasets = [entry]
+    if runs:
+        names = [p.stem for p in logs]
+        if len(set(names)) != len(names):
+            names = [f"run{k + 1}" for k in range(len(logs))]
+        per_file = [dict(entry, file=f, name=nm) for f, nm in zip(files, names)]
+    else:
+        per_file = [entry]
     if hold_out is not None:
-        if not 0.0 < float(hold_out) < 1.0:
-            raise ConfigError(f"jflex case init: hold_out must lie in (0, 1) (the fraction of the log held out for "
-                              f"validation), got {hold_out}")
-        if g["time"] is None:
-            raise ConfigError("jflex case init: hold_out needs the time column, which could not be guessed")
-        tb = next(tb for tb in tables if g["time"] in tb.header)
-        tt = tb.column(g["time"]) * {"ms": 1e-3, "us": 1e-6, "ns": 1e-9}.get(entry["units"]["time"], 1.0)
-        tt = tt[np.isfinite(tt)]
-        split_s = float(round((1.0 - float(hold_out)) * (tt.max() - tt.min()), 6))
-        datasets = [dict(entry, name="train", window=[0.0, split_s]),
-                    dict(entry, split="validation", name="validation", window=[split_s, None])]
+        datasets = []
+        for e, split_s in zip(per_file, splits):
+            base = e.get("name")
+            datasets += [dict(e, name=f"{base}_train" if base else "train", window=[0.0, split_s]),
+                         dict(e, split="validation", name=f"{base}_validation" if base else "validation",
+                              window=[split_s, None])]
+    elif runs:
+        datasets = per_file[:-1] + [dict(per_file[-1], split="validation")]
+    else:
+        datasets = per_file
     cfg = {"robot": {"file": robot_entry, "joints": reduced} if reduced else robot_entry,
-           "nominal_effects": [], "datasets": datasets}
+           "nominal_effects": [dict(e) for e in NOMINAL_FRICTION], "datasets": datasets}
+    validation_note = (
+        [f"# The last {100 * float(hold_out):g} % of each log is its validation set (window, seconds from its first "
+         "stamp)."] if hold_out is not None else
+        [f"# {files[-1]} is the validation set (the gap is judged on it), the other runs the training sets."]
+        if runs else
+        ["#   - a validation data set: another log with split: validation (the gap is judged on held-out data), "
+         "or run 'jflex case init' with --hold-out"])
     head = [
         f"# case.yaml written by 'jflex case init' for {', '.join(p.name for p in logs)} (format: docs/case_format.md).",
         f"# Robot joints: {list(rob.joint_names)}; CSV columns: {header}.",
         *([f"# The logs drive {reduced}: the robot is reduced to them (the others locked at 0; add "
            "robot.lock to lock them elsewhere)."] if reduced else []),
-        "# Check the guessed column map and units; fill in every TODO:",
-        *[f"#   - datasets[0].{t}" for t in todo],
-        *(["#   - a validation data set: another log with split: validation (the gap is judged on held-out data), "
-            "or run 'jflex case init' with --hold-out"] if hold_out is None else
-          [f"# The last {100 * float(hold_out):g} % of the log is the validation set (window, seconds from its first stamp)."]),
-        "#   - nominal_effects: what the nominal model already contains (e.g. {effect: viscous_friction, joint: all})",
+        *([f"# No time column: the rows are {float(rate):g} Hz apart (rate)."] if rate is not None else []),
+        "# nominal_effects: viscous and Coulomb friction at every joint, fitted on the training data (a real joint",
+        "# has both; without them the candidates, one effect at one joint at a time, are left to explain all of",
+        "# it). Delete an entry the drives compensate, add what else the model already contains.",
+        "# Check the guessed column map and units" + (("; fill in every TODO:") if todo or hold_out is None and not runs
+                                                      else "."),
+        *[f"#   - datasets[{0 if len(datasets) == 1 else '*'}].{t}" for t in dict.fromkeys(todo)],
+        *validation_note,
     ]
-    target.write_text("\n".join(head) + "\n" + yaml.safe_dump(cfg, sort_keys=False))
+    target.write_text("\n".join(head) + "\n" + yaml.dump(cfg, Dumper=_Dumper, sort_keys=False))
     return target

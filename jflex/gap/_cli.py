@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from .._errors import JFlexError
+from .._errors import ConfigError, JFlexError
 from .._runs import make_run_dir
 
 
@@ -18,6 +18,9 @@ def _diagnose(args) -> int:
     # the stages on stderr while a person watches (a terminal); nothing in a log. The stage line
     # is closed before an error is printed, so the two never share a line
     try:
+        if args.max_effects is not None and args.max_effects < 0:
+            raise ConfigError(f"--max-effects: expected an integer >= 0 (as options.max_effects), got "
+                              f"{args.max_effects}")
         with stages("diagnose") as say:
             say("reading the case")
             case = load_case(args.case, allow_outside=args.allow_outside)
@@ -39,7 +42,7 @@ def _case_init(args) -> int:
     from ._case_init import case_init
 
     try:
-        path = case_init(args.robot, args.log, args.out, hold_out=args.hold_out)
+        path = case_init(args.robot, args.log, args.out, hold_out=args.hold_out, rate=args.rate)
     except JFlexError as exc:
         print(f"jflex case init: {exc}", file=sys.stderr)
         return 2
@@ -101,11 +104,14 @@ def add_subcommands(sub) -> None:
     csub = c.add_subparsers(dest="case_command", required=True)
     ci = csub.add_parser("init", help="a starting case.yaml from the robot's joints and a CSV log's header")
     ci.add_argument("robot", help="a URDF or robot YAML file, or a config name (e.g. panda)")
-    ci.add_argument("log", nargs="+", help="the CSV log(s) of one run (header line of column names); several "
-                    "files (e.g. positions, velocities, efforts) are merged on their time column")
+    ci.add_argument("log", nargs="+", help="the CSV log(s) (header line of column names); files with different "
+                    "headers (e.g. positions, velocities, efforts) are one run merged on their time column, files with "
+                    "the same header separate runs, each its own data set (the last one the validation set)")
     ci.add_argument("--out", default=None, help="case folder (default: the first log's folder); the logs are copied there")
     ci.add_argument("--hold-out", type=float, default=None, metavar="FRACTION",
                     help="hold out the log's last FRACTION (e.g. 0.3) of its duration as the validation set")
+    ci.add_argument("--rate", type=float, default=None, metavar="HZ",
+                    help="the sample rate of logs without a time column (row k at k / HZ seconds)")
     ci.set_defaults(fn=_case_init)
     b = sub.add_parser("gap-bench", help="withheld-effect bench of the gap diagnosis", description=BENCH_SIZES)
     b.add_argument("--size", choices=("small", "full"), default="full",

@@ -261,6 +261,9 @@ class Dataset(Strict):
         None, description="torque and response sets: the part of the record used, `[start, end]` in seconds from its "
                           "first stamp (`end` null: to the end); one log can then give a train and a validation set",
         json_schema_extra={"expects": "[start, end] seconds, 0 <= start < end"})
+    rate: float | None = Field(
+        None, description="CSV torque and response logs without a time column only: their sample rate [Hz] (row k "
+                          "is at k / rate s); not with `columns.time`", json_schema_extra={"expects": "number > 0"})
     delimiter: Literal[",", ";", "tab", "space"] | None = Field(
         None, description="CSV only: field separator (default: sniffed from the header line)")
     q0: list[float] | dict[str, float] | None = Field(
@@ -294,6 +297,11 @@ class Dataset(Strict):
             raise _bad("window", "expected finite 0 <= start < end (seconds), got {got}", got=repr(v))
         return [a, b]
 
+    @field_validator("rate", mode="before")
+    @classmethod
+    def _rate(cls, v):
+        return None if v is None else _number(v, "> 0", v)
+
     @field_validator("q0", mode="before")
     @classmethod
     def _q0(cls, v):
@@ -322,7 +330,7 @@ class Dataset(Strict):
             ok = " or ".join(_FORMAT_LABEL[f] for f, ks in FORMAT_KINDS.items() if self.kind in ks)
             raise _bad("file", "a {kind} data set cannot be a {fmt} file (expected {ok})", at="file", kind=self.kind,
                        fmt=fmt.upper(), ok=ok)
-        csv_only = ("columns", "units", "delimiter")
+        csv_only = ("columns", "units", "delimiter", "rate")
         for k in csv_only:
             if fmt != "csv" and getattr(self, k) is not None:
                 raise _bad("format_key", "only for CSV data sets (this file is {fmt})", at=k, fmt=fmt.upper())
@@ -348,6 +356,14 @@ class Dataset(Strict):
                 raise _bad("missing", "missing (a CSV data set needs its column map, see docs/case_format.md)",
                            at="columns")
             need, opt = CSV_COLUMNS[self.kind]
+            if self.rate is not None:
+                if self.kind == "modal":
+                    raise _bad("format_key", "a modal table has no time axis (rate is for torque and response "
+                               "logs)", at="rate")
+                if self.columns.time is not None:
+                    raise _bad("format_key", "give the stamps once: either columns.time or rate (a log without a "
+                               "time column), not both", at="rate")
+                need, opt = tuple(k for k in need if k != "time"), opt
             for k in need:
                 if getattr(self.columns, k) is None:
                     raise _bad("missing", "missing (a {kind} CSV needs columns {need})", at=f"columns.{k}",
