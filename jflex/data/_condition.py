@@ -12,14 +12,21 @@ from .._errors import DataError
 
 JITTER = 0.01  # largest deviation of a step from the median step kept as it is (relative)
 DROP = 1.5  # a step over 1.5 median steps: samples were dropped there
-MAX_GAP = 5.0  # longest step (in median steps) resampling may bridge: beyond, it would invent data
+MAX_GAP = 5.0  # longest step (in median steps) resampling always bridges
+BRIDGE = 0.05  # ... and beyond, a gap shorter than this fraction of the motion's shortest period (1 / its band):
+# linear interpolation over it misses at most (pi BRIDGE)^2 / 2, about 1 %, of the band edge's amplitude
+STALE_RUN = 3  # rows equal to the previous one in every channel, in runs up to this long, are stale readings
+# (removed and interpolated); a longer run is a robot at rest logged without noise, kept as it is
+JUMP = 50.0  # an angle step over 50 x every step near it is a splice, not motion
+JUMP_WINDOW = 5  # samples each side a step is compared with
 
 DEAD_ZEROS = 0.5  # a channel reading exactly 0 in half of its samples or more is off
 STUCK_RUN = 0.25  # ... holding one value for a quarter of the record in one run is stuck
 FLAT_REL = 1e-4  # ... whose spread is below 1e-4 of the median spread of its fellows is flat
-SATURATED = 0.05  # ... sitting exactly at its largest or smallest value in 5 % of the samples clips
+CLIP_RUN = 5  # ... sitting at its largest or smallest value for runs of 5 samples or more (and longer than
+# twice any other value's hold) while the robot moves clips there: those samples are masked (``tau_valid``)
 FEW_LEVELS = 8  # ... taking fewer distinct values than this carries no waveform
-EXCLUDE_FLAGS = ("dead", "flat", "stuck", "saturated", "few_levels")  # left out of the gap
+EXCLUDE_FLAGS = ("dead", "flat", "stuck", "few_levels")  # left out of the gap (a saturated one is masked)
 
 SPIKE_WINDOW = 7  # samples of the running median a spike is measured against
 SPIKE_SIGMA = 8.0  # a spike stands this many robust standard deviations off the running median
@@ -32,14 +39,27 @@ ENERGY_FRACTION = 0.999  # last fallback band: the frequency below which this sh
 TAIL_FRACTION = 1e-6  # spectrum_floor's band ends where each angle column has all but this share of its power
 
 
+def _stale_rows(same_row) -> np.ndarray:
+    """(N,) bool: the rows of ``same_row`` (equal to the previous row) in runs of at most ``STALE_RUN``."""
+    run = np.concatenate([[0], np.cumsum(same_row[1:] != same_row[:-1])])
+    length = np.bincount(run)[run]
+    return same_row & (length <= STALE_RUN)
+
+
 def clean_stamps(t, arrays: dict, where: str):
-    """Repeated time stamps removed (the first row kept), a step back in time refused.
+    """Repeated time stamps removed (the first row kept), stale rows removed, a step back in time
+    refused.
 
     **Returns** ``(t, arrays, report)``; the report counts ``repeated_stamps`` (rows dropped) and
-    ``repeated_rows`` (rows equal to the previous one in every channel at a later stamp: a logger
-    that wrote a stale sample; counted, kept)."""
+    ``repeated_rows`` (stale rows removed: rows equal to the previous one in every channel at a
+    later stamp, a logger that wrote its last sample again, in runs of at most ``STALE_RUN``; kept,
+    they hold the motion still for a step and put a kink into every derivative. The resampling
+    interpolates across them. A longer run of equal rows is a robot at rest and stays)."""
     t = np.asarray(t, float)
     dt = np.diff(t)
+    if t.size > 1 and np.all(dt == 0):
+        raise DataError(f"{where}: field 't': the stamps are all equal ({t.size} rows at {t[0]:.9g} s); a time "
+                        "series needs increasing stamps (is the time column the right one?)")
     if np.any(dt < 0):
         k = int(np.argmax(dt < 0))
         raise DataError(f"{where}: field 't': time goes back at sample {k + 1} ({t[k + 1]:.9g} s after "
@@ -47,26 +67,60 @@ def clean_stamps(t, arrays: dict, where: str):
     keep = np.concatenate([[True], dt > 0])
     stacked = np.column_stack([np.asarray(a, float).reshape(t.size, -1) for a in arrays.values()]) if arrays \
         else np.zeros((t.size, 0))
-    same_row = np.concatenate([[False], np.all(stacked[1:] == stacked[:-1], axis=1)]) if stacked.shape[1] else \
-        np.zeros(t.size, bool)
-    report = {"repeated_stamps": int((~keep).sum()), "repeated_rows": int((same_row & keep).sum())}
+    if stacked.shape[1]:
+        # equal to the previous row at a new stamp (rows at a repeated stamp are dropped first)
+        k = np.flatnonzero(keep)
+        same = np.concatenate([[False], np.all(stacked[k[1:]] == stacked[k[:-1]], axis=1)])
+        stale = np.zeros(t.size, bool)
+        stale[k] = _stale_rows(same)
+    else:
+        stale = np.zeros(t.size, bool)
+    report = {"repeated_stamps": int((~keep).sum()), "repeated_rows": int(stale.sum())}
+    keep &= ~stale
     if keep.all():
         return t, arrays, report
     return t[keep], {k: np.asarray(a)[keep] for k, a in arrays.items()}, report
 
 
+def _gap_band(t, q, h: float) -> float | None:
+    """The motion band [Hz] of angles ``q`` (N, m) at stamps ``t`` (median step ``h``), read off
+    the longest stretch without a gap or a dropped sample (:func:`jflex.identify.motion_band`); None
+    when that stretch is too short to tell (under 256 samples)."""
+    from ..identify._signal import motion_band
+
+    q = np.asarray(q, float).reshape(t.size, -1)
+    if not q.shape[1]:
+        return None
+    brk = np.flatnonzero(np.diff(t) > DROP * h)
+    edges = np.concatenate([[0], brk + 1, [t.size]])
+    k = int(np.argmax(np.diff(edges)))
+    lo, hi = int(edges[k]), int(edges[k + 1])
+    if hi - lo < 256:
+        return None
+    return motion_band(q[lo:hi], float(np.mean(np.diff(t[lo:hi]))))
+
+
 def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max_gap: float = MAX_GAP,
-                     field: str = "t"):
+                     field: str = "t", motion: str | None = "q"):
     """``t`` and ``arrays`` (rows at ``t``) as they are if every step is within ``jitter`` of the
     median step, else linearly interpolated onto a uniform grid whose step is the mean of the
     steps that dropped nothing (the median of jittered steps is a noisier estimate of the rate).
-    A gap over ``max_gap`` median steps is refused rather than bridged.
+
+    A gap (a step over ``max_gap`` median steps) is bridged when it is shorter than ``BRIDGE`` of
+    the shortest period of the motion (the band of the angles ``arrays[motion]``, read off the
+    longest stretch without a gap; :func:`jflex.identify.motion_band`); longer gaps, or any gap
+    when there are no angles to judge it by, are refused, every one named with its time and length
+    (the log is then cut there into several data sets).
 
     **Returns** ``(t, arrays, report)``: ``rate_hz``, ``jitter_pct`` (largest deviation from the
     median step of the steps that dropped nothing), ``longest_step`` (in median steps),
-    ``dropped_samples`` (missing samples at steps over 1.5 median steps), ``resampled``."""
+    ``dropped_samples`` (missing samples at steps over 1.5 median steps), ``resampled``, and
+    ``gaps`` (every gap: ``t_s`` where it starts, ``length_s``, ``steps``) when there are any."""
     t = np.asarray(t, float)
     dt = np.diff(t)
+    if t.size < 2 or np.all(dt == 0):
+        raise DataError(f"{where}: field '{field}': the stamps are all equal ({t.size} row(s) at "
+                        f"{t[0] if t.size else float('nan'):.9g} s); a time series needs increasing stamps")
     h = float(np.median(dt))
     if not h > 0:
         raise DataError(f"{where}: field '{field}': the median time step is {h:g} s (time must increase)")
@@ -81,11 +135,23 @@ def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max
     if dev <= jitter:
         report["rate_hz"] = 1.0 / float(dt.mean())
         return t, arrays, report
-    k = int(np.argmax(dt))
-    if dt[k] > max_gap * h:
-        raise DataError(f"{where}: field '{field}': a gap of {dt[k]:.6g} s after t = {t[k]:.6g} s ({dt[k] / h:.1f} median "
-                        f"steps of {h:.6g} s); resampling would invent the data in it (cut the log there into two "
-                        "data sets)")
+    gaps = np.flatnonzero(dt > max_gap * h)
+    if gaps.size:
+        band = _gap_band(t, arrays[motion], h) if motion is not None and motion in arrays else None
+        longest = BRIDGE / band if band else 0.0
+        report["gaps"] = [{"t_s": float(t[k]), "length_s": float(dt[k]), "steps": float(dt[k] / h)} for k in gaps]
+        if band:
+            report["gap_bridge_limit_s"] = longest
+        long = [k for k in gaps if dt[k] > longest]
+        if long:
+            why = (f"longer than {BRIDGE:g} of the motion's shortest period ({longest:.3g} s, its band {band:.3g} Hz): "
+                   "interpolation would invent the motion in it") if band else \
+                ("no angles to judge it against: interpolation could invent the data in it")
+            named = "; ".join(f"a gap of {dt[k]:.6g} s after t = {t[k]:.6g} s ({dt[k] / h:.1f} median steps)" for k in long)
+            raise DataError(f"{where}: field '{field}': {named}: {len(long)} gap(s) over {max_gap:g} median steps of "
+                            f"{h:.6g} s {why}; cut the log at each into separate data sets")
+        for g in report["gaps"]:
+            g["action"] = "bridged by linear interpolation"
     step = float(np.mean(dt[~drops]))
     grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step * (1 + 1e-12))) + 1)
     out = {}
@@ -147,6 +213,25 @@ def _longest_run(x, moving=None) -> int:
     return int(np.bincount(run, weights=w).max())
 
 
+def clipped_samples(x, moving=None) -> np.ndarray:
+    """(N,) bool: the samples of ``x`` (N,) where it clips: runs at its largest or smallest value of
+    at least ``CLIP_RUN`` samples, and longer than twice the longest hold of any other value (a
+    quantised reading holds its levels too), counting only samples where ``moving`` (N,) bool when
+    given (a robot at rest may hold a noise-free torque that is its extreme)."""
+    x = np.asarray(x, float)
+    out = np.zeros(x.size, bool)
+    if x.size < 2 or not x.max() > x.min():
+        return out
+    run = np.concatenate([[0], np.cumsum(np.diff(x) != 0)])
+    w = np.ones(x.size) if moving is None else np.asarray(moving, float)
+    length = np.bincount(run, weights=w)
+    value = x[np.searchsorted(run, np.arange(run[-1] + 1))]
+    rail = (value == x.max()) | (value == x.min())
+    other = float(length[~rail].max()) if (~rail).any() else 0.0
+    clip = rail & (length >= max(CLIP_RUN, 2.0 * other + 1.0))
+    return clip[run]
+
+
 def channel_quality(x, fellow_std: float | None = None, moving=None) -> dict:
     """What is wrong with one channel ``x`` (N,): ``{"flags": [...], ...numbers}``.
 
@@ -154,8 +239,9 @@ def channel_quality(x, fellow_std: float | None = None, moving=None) -> dict:
     ``flat``: constant, or its spread below ``FLAT_REL`` of ``fellow_std`` (the median spread of
     the other channels of its kind); ``stuck``: one value held in a single run of ``STUCK_RUN`` of
     the record while the robot moves (``moving`` (N,) bool, when given: a robot at rest may hold
-    a noise-free torque); ``saturated``: ``SATURATED`` of the samples exactly at its largest or smallest
-    value (clipping); ``few_levels``: fewer than ``FEW_LEVELS`` distinct values."""
+    a noise-free torque); ``saturated``: clipping (:func:`clipped_samples`: held at its largest or
+    smallest value for more than a few samples; ``clipped_fraction`` of the samples, which are
+    masked, the rest of the channel kept); ``few_levels``: fewer than ``FEW_LEVELS`` distinct values."""
     x = np.asarray(x, float)
     n = max(x.size, 1)
     zeros = float(np.mean(x == 0.0))
@@ -172,10 +258,45 @@ def channel_quality(x, fellow_std: float | None = None, moving=None) -> dict:
         flags.append("stuck")
     if levels < FEW_LEVELS and std > 0 and "dead" not in flags:
         flags.append("few_levels")
-    if levels >= FEW_LEVELS and rail >= SATURATED and "dead" not in flags:
+    clipped = clipped_samples(x, moving) if levels >= FEW_LEVELS and "dead" not in flags else np.zeros(x.size, bool)
+    if clipped.any():
         flags.append("saturated")
     return {"flags": flags, "zero_fraction": zeros, "std": std, "levels": levels, "longest_run_fraction": run,
-            "at_extreme_fraction": rail}
+            "at_extreme_fraction": rail, "clipped_fraction": float(clipped.mean()) if x.size else 0.0,
+            "clipped": clipped}
+
+
+def angle_jumps(t, q, where: str, names=None) -> None:
+    """Refuse angles ``q`` (N, m) at stamps ``t`` that jump in one sample: a step over ``JUMP`` x
+    every other step within ``JUMP_WINDOW`` samples of it (and over ``JUMP`` x the column's smallest
+    nonzero step, an encoder's count); ``names`` (m,) the columns' joints. A log spliced from two runs, or an angle that wraps, puts
+    an impulse into every derivative the diagnosis takes there; motion, however fast, changes its
+    step gradually. The error names each such sample and its time."""
+    q = np.asarray(q, float).reshape(t.size, -1)
+    if t.size < 3:
+        return
+    d = np.abs(np.diff(q, axis=0))
+    found = []
+    for j in range(q.shape[1]):
+        dj = d[:, j]
+        nz = dj[dj > 0]
+        if nz.size < 2:
+            continue
+        # the largest step around each one, itself left out
+        W = JUMP_WINDOW
+        pad = np.lib.stride_tricks.sliding_window_view(np.r_[np.zeros(W), dj, np.zeros(W)], 2 * W + 1)
+        near = np.maximum(pad[:, :W].max(axis=1), pad[:, W + 1:].max(axis=1))
+        for k in np.flatnonzero((dj > JUMP * near) & (dj > JUMP * float(nz.min()))):
+            found.append((int(k) + 1, j, float(q[k + 1, j] - q[k, j]), float(near[k])))
+    if found:
+        found.sort()
+        label = (lambda j: f"joint {names[j]}") if names is not None and len(names) == q.shape[1] else \
+            (lambda j: f"column {j}")
+        named = "; ".join(f"{label(j)} at sample {k} (t = {t[k]:.6g} s): {dq:+.4g} rad against steps of at most "
+                          f"{typ:.3g} rad around it" for k, j, dq, typ in found[:10])
+        more = f" and {len(found) - 10} more" if len(found) > 10 else ""
+        raise DataError(f"{where}: field 'q': the angle jumps in one sample, {named}{more}: a log spliced from "
+                        "separate runs (or an angle that wraps); cut the log there into separate data sets")
 
 
 def find_spikes(x) -> np.ndarray:
@@ -234,17 +355,23 @@ def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_sp
     rest = {k: v for k, v in arrays.items() if k not in rows}
     t, rows, rep_stamps = clean_stamps(t, rows, where)
     t, rows, rep_rate = resample_uniform(t, rows, where)
+    angle_jumps(t, rows["q"], where, joints)
     report = {"sampling": {**rep_rate, **rep_stamps}}
     tau = np.asarray(rows["tau"], float).copy()
     stds = tau.std(axis=0)
     q = np.asarray(rows["q"], float)
     moving = np.concatenate([[False], np.any(np.diff(q, axis=0) != 0, axis=1)]) if q.shape[1] else None
     channels, spikes, excluded = {}, {}, []
+    valid = np.ones(tau.shape, bool)
     for k, j in enumerate(joints):
         others = np.delete(stds, k)
         fellow = float(np.median(others)) if others.size else None
         qual = channel_quality(tau[:, k], fellow, moving)
+        clipped = qual.pop("clipped")
         bad = [f for f in qual["flags"] if f in EXCLUDE_FLAGS]
+        if clipped.any() and j not in keep:
+            valid[:, k] = ~clipped
+            qual["clipped_from_s"] = float(t[np.argmax(clipped)])
         if bad and j not in keep:
             excluded.append(j)
         elif not bad:
@@ -258,6 +385,9 @@ def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_sp
         qual["kept_by_user"] = bool(bad) and j in keep
         channels[j] = qual
     rows["tau"] = tau
+    if not valid.all():
+        # the clipped samples, masked in every fit and in the gap (jflex.gap.torque_set)
+        rows["tau_valid"] = valid
     report["channels"] = channels
     report["spikes"] = spikes
     report["excluded"] = list(excluded)

@@ -53,6 +53,14 @@ class TorqueSet:
     noise: np.ndarray | None = None  # (n,) torque-residual noise std [N m] the processing predicts
     processing: dict = dataclasses.field(default_factory=dict)  # what was derived, for the report
     cache: dict = dataclasses.field(default_factory=dict)  # backlash torques, filtered columns
+    # (N, n) 1 where a measured torque enters the fits and the gap, 0 where it does not (a clipping
+    # sensor's samples, widened by the filter's reach); None: every sample enters
+    weight: np.ndarray | None = None
+
+    def row_weights(self) -> np.ndarray:
+        """(N, n) weights of the fits' rows: each joint's ``1 / scale`` times :attr:`weight`."""
+        w = np.broadcast_to((1.0 / self.scale)[None, :], self.tau.shape)
+        return w if self.weight is None else w * self.weight
 
     @property
     def Ypay(self) -> np.ndarray:
@@ -143,16 +151,20 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
 
     a = ds.arrays
     t, tau_raw = np.asarray(a["t"], float), np.asarray(a["tau"], float)
+    valid = np.asarray(a["tau_valid"], bool) if "tau_valid" in a else None  # clipped samples masked
     # velocities without accelerations (the loader differentiated them, unfiltered, for the record)
     velocity_only = (getattr(ds, "conditioning", None) or {}).get("derivatives") == "velocity"
     if derivatives_given(ds) and not velocity_only:
         q, qd, qdd = a["q"], a["qd"], a["qdd"]
         F, Y = on_rows(_rigid_batch, (robot,), (q, qd, qdd))
-        return TorqueSet(ds.name, t, q, qd, qdd, tau_raw, F, np.maximum(tau_raw.std(axis=0), 1e-9), Y,
-                         a["q_extra"], ds.extra_joints, robot)
+        weight = None if valid is None else valid.astype(float)
+        return TorqueSet(ds.name, t, q, qd, qdd, tau_raw, F, _spread(tau_raw, weight), Y,
+                         a["q_extra"], ds.extra_joints, robot, weight=weight)
     rows = {"q": np.asarray(a["q"], float), "tau": tau_raw, "q_extra": np.asarray(a["q_extra"], float)}
     if velocity_only:
         rows["qd"] = np.asarray(a["qd"], float)
+    if valid is not None:
+        rows["tau_valid"] = valid.astype(float)
     t, rows, sampling = resample_uniform(t, rows, ds.name)
     q_raw, tau_raw = rows["q"], rows["tau"]
     h = float(np.mean(np.diff(t)))
@@ -207,14 +219,35 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
         raise DataError(f"{ds.name}: field 't': the record ({t[-1] - t[0]:.3g} s) is too short for its low-pass at "
                         f"{fc:.3g} Hz, whose transients take {edge * h:.3g} s at each end")
     sl = slice(edge, t.size - edge, k)
+    weight = None
+    if valid is not None:
+        # a masked sample reaches its neighbours through the filter: one period of the cutoff each way
+        from scipy.ndimage import minimum_filter1d
+
+        reach = int(np.ceil(1.0 / (fc * h)))
+        weight = minimum_filter1d((rows["tau_valid"] >= 1.0 - 1e-9).astype(float), 2 * reach + 1, axis=0,
+                                  mode="nearest")[sl]
     processing = {"angle_noise_rad": sig_q.tolist(), "motion_band_hz": f_m_report, "cutoff_hz": fc, "decimate": k,
                   "cutoff_method": cut["method"], "cutoff": cut, "sampling": sampling,
                   "derivatives": "velocities filtered, then differentiated" if velocity_only else
                   "angles filtered, then differentiated twice", "trimmed_s": edge * h,
                   "torque_noise_nm": np.sqrt(var_tau).tolist(), "propagated_angle_noise_nm": np.sqrt(var_q).tolist()}
-    return TorqueSet(ds.name, t[sl], q[sl], qd[sl], qdd[sl], tau[sl], F[sl], np.maximum(tau[sl].std(axis=0), 1e-9), Y[sl],
+    if weight is not None:
+        processing["masked_fraction"] = (1.0 - weight.mean(axis=0)).tolist()
+    return TorqueSet(ds.name, t[sl], q[sl], qd[sl], qdd[sl], tau[sl], F[sl], _spread(tau[sl], weight), Y[sl],
                      rows["q_extra"][sl], ds.extra_joints, robot, cutoff=fc, noise=np.sqrt(var_tau + var_q),
-                     processing=processing)
+                     processing=processing, weight=weight)
+
+
+def _spread(tau, weight=None) -> np.ndarray:
+    """(n,) std of the measured torque per joint over the samples that enter (``weight`` > 0)."""
+    if weight is None:
+        return np.maximum(tau.std(axis=0), 1e-9)
+    out = np.empty(tau.shape[1])
+    for j in range(tau.shape[1]):
+        x = tau[weight[:, j] > 0, j]
+        out[j] = x.std() if x.size > 1 else 0.0
+    return np.maximum(out, 1e-9)
 
 
 def shift(X, t, d):
@@ -314,7 +347,7 @@ def weighted_inertia_columns(s: TorqueSet):
     """``(Yw, Yw'Yw)``: the set's inertial columns through its parallel filter, rows normalised by
     its torque scale, as every fit sees them (cached)."""
     def make():
-        Yw = (_filtered(s, "Y") * (1.0 / s.scale)[None, :, None]).reshape(s.tau.size, -1)
+        Yw = (_filtered(s, "Y") * s.row_weights()[:, :, None]).reshape(s.tau.size, -1)
         return Yw, Yw.T @ Yw
 
     return _product(s, "Yw", make)
@@ -327,7 +360,7 @@ def _gram(terms, delay, s: TorqueSet, inertia):
     per-term blocks kept with the set: the selection refits the same terms in many combinations,
     and the products over every sample, not the small solve, were its cost."""
     terms = [t for t in terms if t.n_params]
-    w = 1.0 / s.scale
+    w = s.row_weights()
 
     memo = []
 
@@ -335,7 +368,7 @@ def _gram(terms, delay, s: TorqueSet, inertia):
         # the target itself is not kept (one per delay tried, each as long as the record): only
         # its products are
         if not memo:
-            memo.append(((shift(s.tau, s.t, -delay) - _filtered(s, "F0")) * w[None, :]).ravel())
+            memo.append(((shift(s.tau, s.t, -delay) - _filtered(s, "F0")) * w).ravel())
         return memo[0]
 
     yy = _product(s, ("yy", delay), lambda: float(y() @ y()))
@@ -344,7 +377,7 @@ def _gram(terms, delay, s: TorqueSet, inertia):
     def A(i):
         # weighted columns, made only where a product is missing (the filtered ones are cached)
         if i not in cols:
-            c = term_columns(terms[i], s) * w[None, :, None]
+            c = term_columns(terms[i], s) * w[:, :, None]
             cols[i] = c.reshape(s.tau.size, c.shape[2])
         return cols[i]
 
@@ -358,7 +391,7 @@ def _gram(terms, delay, s: TorqueSet, inertia):
     GA = np.block([[AtA(i, j) for j in range(m)] for i in range(m)]) if m else np.zeros((0, 0))
     bA = (np.concatenate([_product(s, ("Ay", terms[i], delay), lambda i=i: A(i).T @ y()) for i in range(m)])
           if m else np.zeros(0))
-    rows = s.tau.size
+    rows = s.tau.size if s.weight is None else int(np.count_nonzero(s.weight))
     if inertia is None:
         return GA, bA, yy, rows
     Yw, YtY = weighted_inertia_columns(s)

@@ -7,7 +7,12 @@ forward selection would name whichever candidate absorbs most of a larger one (a
 closing a 5316 % gap to 951 %). The check: the gain that
 best maps the nominal model's torque onto the measured one, per loaded joint; a gain far from 1
 that alone closes most of that joint's misfit is a scale error of the data, named before any
-effect is.
+effect is. Each joint is judged on its own: a light wrist joint logged in motor current is as
+wrong as a torso, however little of the robot's torque it carries.
+
+A torque channel that reads (nearly) nothing where the model predicts a torque of its own is dead
+(:func:`dead_channels`): a sensor left unpowered reads a constant offset plus noise, and its
+misfit, thousands of per cent, would veto every candidate.
 """
 
 from __future__ import annotations
@@ -19,30 +24,70 @@ from . import _torque as T
 GAIN_LIMIT = 3.0  # a measured torque GAIN_LIMIT x the model's, or 1/GAIN_LIMIT of it: beyond any payload
 # or inertia error a diagnosis could name (an unmodelled payload heavier than the arm's own links)
 CLOSES = 0.5  # ... and the gain alone leaves at most this fraction of the joint's misfit
-LOADED = 0.05  # joints carrying at least this share of the model's torque energy in a set are checked
+TRIVIAL = 0.05  # a joint whose predicted torque's RMS is below this fraction of its measured one is not judged
+NOISE_SNR = 3.0  # ... nor one whose predicted torque's RMS is below 3 x the noise its filtered residual keeps
+DEAD_SPREAD = 0.05  # a channel whose measured spread is below this fraction of its nominal predicted spread,
+FOLLOWS = 0.5  # ... and that does not follow the prediction (|correlation| below this: not a scale error), is dead
+OWN_SHARE = 1e-3  # ... judged only where the joint's nominal spread is at least this share of the set's largest
+
+
+def _kept(s, j) -> np.ndarray:
+    """(N,) bool: the samples of joint ``j`` of set ``s`` that enter the fits (a clipping sensor's do not)."""
+    return np.ones(s.tau.shape[0], bool) if getattr(s, "weight", None) is None else s.weight[:, j] > 0
+
+
+def dead_channels(s, names) -> dict:
+    """``{channel: reason}``: the torque channels of set ``s`` whose measured spread is below
+    :data:`DEAD_SPREAD` of the nominal (CAD) model's spread along the same motion, where the model
+    predicts a torque of its own (:data:`OWN_SHARE` of the set's largest joint spread), and whose
+    reading does not follow the prediction (\|correlation\| below :data:`FOLLOWS`; a channel that does
+    is on a wrong scale, :func:`torque_scale_suspects`)."""
+    F = T._filtered(s, "F0")
+    nom = F.std(axis=0)
+    top = float(np.max(nom)) if nom.size else 0.0
+    out = {}
+    for j, ch in enumerate(names):
+        k = _kept(s, j)
+        y, p = s.tau[k, j], F[k, j]
+        if y.size < 3 or not np.all(np.isfinite(y)) or nom[j] <= OWN_SHARE * top or not nom[j] > 0:
+            continue
+        sy = float(y.std())
+        if sy >= DEAD_SPREAD * nom[j]:
+            continue
+        r = float(np.corrcoef(y, p)[0, 1]) if sy > 0 and p.std() > 0 else 0.0
+        if abs(r) < FOLLOWS:
+            out[ch] = (f"dead against the model: its spread {sy:.3g} N m is {sy / nom[j]:.2g} of the {nom[j]:.3g} N m "
+                       f"the nominal model predicts along the same motion, and it does not follow it (correlation "
+                       f"{r:.2f})")
+    return out
 
 
 def torque_scale_suspects(pb, state) -> list[dict]:
-    """``[{dataset, joint, gain, misfit, misfit_after_gain, offset, misfit_after_offset}]``: torque
-    training sets' loaded joints (at least :data:`LOADED` of the predicted energy) whose measured
-    torque is best matched by the model's times a gain beyond [1/:data:`GAIN_LIMIT`,
+    """``[{dataset, joint, gain, misfit, misfit_after_gain, offset, misfit_after_offset}]``: joints of
+    the torque training sets, each judged on its own where the model predicts a torque of its own
+    (its RMS at least :data:`TRIVIAL` of the measured one's and :data:`NOISE_SNR` x the set's noise),
+    whose measured torque is best matched by the model's times a gain beyond [1/:data:`GAIN_LIMIT`,
     :data:`GAIN_LIMIT`] that closes at least 1 - :data:`CLOSES` of the misfit (relative RMS, of the
     measured torque's RMS); ``offset`` [N m] is the constant that, added to the model's torque
     instead, matches it best, and ``misfit_after_offset`` what it leaves (:func:`scale_reason` names
-    the better of the two)."""
+    the better of the two). Masked samples (a clipping sensor's) are left out."""
     out = []
     for s in pb.ttrain:
         pred = T.predict(state.tfit, s)
-        energy = np.sum(pred**2, axis=0)
-        total = float(np.sum(energy))
-        if not np.isfinite(total) or total <= 0:
-            continue
         for j in range(pb.n):
-            if energy[j] < LOADED * total or not np.isfinite(s.scale[j]):
+            if not np.isfinite(s.scale[j]):
                 continue
-            p, y = pred[:, j], s.tau[:, j]
-            gain = float(p @ y / energy[j])
+            k = _kept(s, j)
+            p, y = pred[k, j], s.tau[k, j]
+            energy = float(p @ p)
+            if not (np.isfinite(energy) and energy > 0):
+                continue
+            rms_p = float(np.sqrt(np.mean(p**2)))
             norm = float(np.sqrt(np.mean(y**2))) or 1.0
+            noise = float(s.noise[j]) if getattr(s, "noise", None) is not None else 0.0
+            if rms_p < TRIVIAL * norm or rms_p < NOISE_SNR * noise:
+                continue
+            gain = float(p @ y / energy)
             before = float(np.sqrt(np.mean((y - p) ** 2))) / norm
             after = float(np.sqrt(np.mean((y - gain * p) ** 2))) / norm
             if (gain > GAIN_LIMIT or gain < 1.0 / GAIN_LIMIT) and after <= CLOSES * before:

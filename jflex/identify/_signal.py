@@ -60,31 +60,78 @@ BUTTER_ORDER = 4  # zero-phase Butterworth: order 4 each way (8 in all), flat pa
 MOTION_SNR = 100.0  # the motion's band ends where its angle spectrum falls to 100 x the angle noise
 
 
+REPEATS = 0.05  # a column whose reading stays the same over 5 % of its steps or more while it moves
+REPEAT_RUN = 50  # (in holds of at most 50 steps: a longer one is a rest) is quantised coarsely
+POWER_SHARE = 0.999  # ... and its motion band is held within POWER_SPAN x where this share of its power lies
+POWER_SPAN = 3.0
+
+
+def _repeats(q) -> np.ndarray:
+    """(n,) bool: the columns of ``q`` (N, n) whose reading stays the same over ``REPEATS`` of the
+    steps, counting holds of at most ``REPEAT_RUN`` steps (an encoder grid coarser than a step of
+    the motion; a robot at rest holds its reading far longer)."""
+    q = np.asarray(q, dtype=float)
+    out = np.zeros(q.shape[1], bool)
+    if q.shape[0] < 2:
+        return out
+    for j, z in enumerate((np.diff(q, axis=0) == 0).T):
+        run = np.concatenate([[0], np.cumsum(z[1:] != z[:-1])])
+        length = np.bincount(run)[run]
+        out[j] = np.mean(z & (length <= REPEAT_RUN)) >= REPEATS
+    return out
+
+
 def angle_noise(q):
     """Noise std [rad] per column of sampled angles ``q`` (N, n): the larger of the white-noise
     estimate from the robust spread of the second difference, ``MAD(d2 q) / sqrt(6)``, and the
     quantisation noise ``step / sqrt(12)`` of an encoder whose readings sit on a grid (the second
-    difference of a slowly moving quantised angle is mostly zero, so its MAD alone reads ~0)."""
+    difference of a slowly moving quantised angle is mostly zero, so its MAD alone reads ~0). The
+    step is the smallest nonzero increment when every increment is (near) a whole number of it, or
+    when the readings repeat (``REPEATS``: a grid the log's rounding or resampling has blurred)."""
     q = np.asarray(q, dtype=float)
     d2 = q[2:] - 2 * q[1:-1] + q[:-2]
     mad = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
     out = np.empty(q.shape[1])
+    rep = _repeats(q)
     for j in range(q.shape[1]):
         dq = np.abs(np.diff(q[:, j]))
         dq = dq[dq > 1e-15]
         step = 0.0
         if dq.size:
             s0 = float(np.min(dq))
-            # a grid: every increment is (near) a whole number of the smallest one
-            if s0 > 0 and np.all(np.abs(dq / s0 - np.round(dq / s0)) < 0.02):
+            # a grid: every increment is (near) a whole number of the smallest one, the step
+            # refined over all of them (a log that rounds its readings blurs the smallest one)
+            s1 = s0
+            for reach in (10.0, np.inf):  # the small multiples first: a wrong count there is unlikely
+                d = dq[dq < reach * s1]
+                k = np.round(d / s1)
+                s1 = float(d @ k / (k @ k))
+            k = np.round(dq / s1)
+            if s0 > 0 and (rep[j] or np.all(np.abs(dq / s0 - k) < 0.02) or np.all(np.abs(dq - k * s1) < 0.1 * s1)):
                 step = s0
         out[j] = max(float(mad[j]), step / np.sqrt(12.0))
     return out
 
 
+def power_band(q, dt: float, share: float = POWER_SHARE) -> float:
+    """The highest, over the columns of ``q`` (N, n), of the frequency [Hz] below which ``share`` of
+    the detrended column's power lies (Welch)."""
+    from scipy.signal import detrend, welch
+
+    f, P = welch(detrend(np.asarray(q, float), axis=0), fs=1.0 / dt, nperseg=min(len(q), 1024), axis=0)
+    edges = [float(f[min(int(np.searchsorted(c, share * c[-1])), f.size - 1)]) for c in np.cumsum(P, axis=0).T
+             if c[-1] > 0]
+    return max(edges, default=0.0)
+
+
 def motion_band(q, dt: float, noise=None) -> float:
     """Highest frequency [Hz] where some column's angle spectrum (Welch) stands ``MOTION_SNR``
-    above the white angle noise ``noise`` (std per column, default :func:`angle_noise`)."""
+    above the white angle noise ``noise`` (std per column, default :func:`angle_noise`).
+
+    On angles whose readings repeat (a coarse or blurred encoder grid, :data:`REPEATS`) the noise
+    estimate is no better than the grid's: a resampled or rounded log reads a fraction of it, and
+    the band ran to 20-45 x the motion's. There the band is held within ``POWER_SPAN`` x the
+    frequency below which ``POWER_SHARE`` of the angles' power lies (:func:`power_band`)."""
     from scipy.signal import welch
 
     q = np.asarray(q, dtype=float)
@@ -100,7 +147,12 @@ def motion_band(q, dt: float, noise=None) -> float:
     level = 2.0 * sig[None, :] ** 2 / fs * np.maximum(gain[:, None], 1e-300)
     above = (P > MOTION_SNR * level).any(axis=1)
     above[0] = False
-    return float(f[np.flatnonzero(above)[-1]]) if above.any() else float(f[1])
+    band = float(f[np.flatnonzero(above)[-1]]) if above.any() else float(f[1])
+    if _repeats(q).any():
+        edge = power_band(q, dt)
+        if edge > 0:
+            band = min(band, max(POWER_SPAN * edge, float(f[1])))
+    return band
 
 
 def zero_phase_lowpass(x, dt: float, cutoff: float):
