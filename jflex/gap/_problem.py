@@ -21,6 +21,7 @@ from . import _degenerate as D
 from . import _frequency_model as L
 from . import _response as R
 from . import _torque as T
+from ._torque_scale import dead_channels
 from ._torque_terms import KINDS, make_term
 
 TORQUE_EFFECTS = tuple(KINDS)
@@ -140,6 +141,9 @@ class Problem:
             for i, s in enumerate(sets):
                 raw = next(d for d in case.datasets if d.name == s.name).arrays["tau"]
                 bad, why = D.torque_channels(s.name, raw, s.F0, self.names)
+                for ch, r in dead_channels(s, self.names).items():
+                    if ch not in (self.options.get("keep_channels") or ()):
+                        bad.setdefault(ch, r)
                 drop = dict(self.excluded.get(s.name, {}))
                 for ch, r in bad.items():
                     drop.setdefault(ch, r)
@@ -466,8 +470,10 @@ class Problem:
         for s in tsets:
             pred = T.predict(state.tfit, s)
             e = (pred - s.tau) / s.scale
+            if s.weight is not None:
+                e = e * s.weight  # masked samples (a clipping sensor's) carry no residual
             m = self.included(s.name) if sets == "validation" else np.isfinite(s.scale)
-            g, ch, w = pooled_gap(e, s.scale, m)
+            g, ch, w = pooled_gap(e, s.scale, m, s.weight)
             out[s.name] = dict(kind="torque", nrmse=g,
                                channels={self.names[j]: float(ch[j]) for j in range(self.n) if m[j]},
                                weights={self.names[j]: float(w[j]) for j in range(self.n) if m[j]},
@@ -501,15 +507,17 @@ class Problem:
         return out
 
 
-def pooled_gap(e, scale, m) -> tuple[float, np.ndarray, np.ndarray]:
+def pooled_gap(e, scale, m, weight=None) -> tuple[float, np.ndarray, np.ndarray]:
     """A torque set's gap [%] from its residual ``e`` (N, n) in units of each joint's torque spread
     ``scale`` (n,), over the channels ``m`` (n,) bool: ``(gap, per-joint NRMSE [%], weights)``.
     The joints are pooled as residual energy over torque-signal energy,
     ``sqrt(sum_j mse_j / sum_j scale_j^2)``: each joint's NRMSE^2 weighs by its share of the signal
     energy, ``scale_j^2 / sum scale^2``, so that a near-idle joint, whose small spread makes any
-    error a large NRMSE, cannot outvote a loaded one; left-out channels weigh nothing."""
+    error a large NRMSE, cannot outvote a loaded one; left-out channels weigh nothing. With
+    ``weight`` (N, n), a channel's mean is over its samples of nonzero weight (masked ones zero in ``e``)."""
     e, scale, m = np.asarray(e, float), np.asarray(scale, float), np.asarray(m, bool)
-    ch = np.sqrt(np.mean(e**2, axis=0)) * 100
+    rows = e.shape[0] if weight is None else np.maximum(np.count_nonzero(weight, axis=0), 1)
+    ch = np.sqrt(np.sum(e**2, axis=0) / rows) * 100
     w = np.where(m, np.where(np.isfinite(scale), scale, 0.0), 0.0) ** 2
     w = w / w.sum() if w.sum() > 0 else w
     return float(np.sqrt(np.sum(np.where(m, w * ch**2, 0.0)))), ch, w
