@@ -163,9 +163,23 @@ class Seed000VibrationConfig(_Strict):
     atol: Positive
 
 
+def quick_figures(res) -> dict:
+    """The key figures of ``--quick`` against the closed forms, loosely (x0 = 10 mm)."""
+    amp = max(abs(f["amplitude_m"] / f["amplitude_closed_form_m"] - 1) for f in res["forced_steady_state"])
+    phase = max(abs(f["phase_rad"] - f["phase_closed_form_rad"]) for f in res["forced_steady_state"])
+    duh = res["duhamel_half_sine"]
+    return {
+        "free response, max error [m]": (max(f["max_error_m"] for f in res["free"]), 0.0, 1e-6),
+        "forced amplitude, max relative error": (amp, 0.0, 1e-3),
+        "forced phase, max error [rad]": (phase, 0.0, 1e-3),
+        "Duhamel half sine, max difference / peak": (duh["max_abs_difference_m"] / duh["peak_response_m"], 0.0, 1e-3),
+    }
+
+
 def main(argv=None):
     return jflex.experiment_cli("seed000_vibration", HERE.parent / "configs" / "seed000_vibration.yaml", run, argv,
-                                schema=Seed000VibrationConfig)
+                                schema=Seed000VibrationConfig,
+                                quick=(HERE.parent / "configs" / "seed000_vibration_quick.yaml", quick_figures))
 
 
 if __name__ == "__main__":

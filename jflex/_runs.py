@@ -179,6 +179,27 @@ def load_yaml(path: str | os.PathLike) -> dict:
     return data
 
 
+Check = Callable[[Mapping[str, Any]], Mapping[str, tuple[float, float, float]]]
+
+
+def quick_check(name: str, figures: Mapping[str, tuple[float, float, float]]) -> dict:
+    """Print each ``figure: (value, low, high)`` and raise a :class:`JFlexError` naming those
+    outside ``[low, high]`` (or not finite). Returns them as ``{figure: {value, low, high, ok}}``."""
+    from ._errors import JFlexError
+
+    rows, bad = {}, []
+    for fig, (value, low, high) in figures.items():
+        value = float(value)
+        ok = math.isfinite(value) and low <= value <= high
+        rows[fig] = {"value": value, "low": low, "high": high, "ok": ok}
+        print(f"{name} --quick: {fig} = {value:.6g} ({'ok' if ok else 'OUT OF'} [{low:.6g}, {high:.6g}])", flush=True)
+        if not ok:
+            bad.append(f"{fig} = {value:.6g} not in [{low:.6g}, {high:.6g}]")
+    if bad:
+        raise JFlexError(f"{name} --quick: " + "; ".join(bad))
+    return rows
+
+
 def experiment_cli(
     name: str,
     default_config: str | os.PathLike,
@@ -186,18 +207,30 @@ def experiment_cli(
     argv: Sequence[str] | None = None,
     description: str | None = None,
     schema: type | None = None,
+    quick: tuple[str | os.PathLike, Check] | None = None,
 ) -> pathlib.Path:
-    """Parse ``[CONFIG] [--out DIR]``, call ``run(config_dict, run_dir)`` and write its results.
+    """Parse ``[CONFIG] [--out DIR] [--quick]``, call ``run(config_dict, run_dir)`` and write its results.
 
     ``run`` returns the results mapping; it may also write plots into ``run_dir``.
     ``schema``: a pydantic model of the config (``extra="forbid"`` refuses unknown keys); the YAML
     is validated against it before ``run`` (a :class:`ConfigError` naming file and field) and
-    ``run`` gets its dump, defaults filled in. Returns the run folder.
+    ``run`` gets its dump, defaults filled in. ``quick``: ``(config, check)``: ``--quick`` runs
+    that (small) config unless one is named, then ``check(results)`` gives the key figures as
+    ``{figure: (value, low, high)}``, loose bounds around their references, which
+    :func:`quick_check` prints and enforces (a run that passes them under ``results["quick_check"]``).
+    Returns the run folder.
     """
     parser = argparse.ArgumentParser(prog=name, description=description)
-    parser.add_argument("config", nargs="?", default=str(default_config), help="YAML config (default: %(default)s)")
+    parser.add_argument("config", nargs="?", default=None, help=f"YAML config (default: {default_config})")
     parser.add_argument("--out", default=None, help="run folder (default: a fresh runs/<name>-<time>)")
+    if quick is not None:
+        parser.add_argument("--quick", action="store_true",
+                            help=f"a small run (under a minute; default config {pathlib.Path(quick[0]).name}) whose key "
+                            "figures are checked loosely against their references")
     args = parser.parse_args(argv)
+    is_quick = getattr(args, "quick", False)
+    if args.config is None:
+        args.config = str(quick[0] if is_quick else default_config)
     cfg = load_yaml(args.config)
     if schema is not None:
         from ._schema import validate
@@ -210,5 +243,8 @@ def experiment_cli(
     results = dict(run(cfg, run_dir))
     results.setdefault("config", str(args.config))
     write_results(run_dir, results)
+    if is_quick:
+        results["quick_check"] = quick_check(name, quick[1](results))
+        write_results(run_dir, results)
     print(f"{name}: results in {run_dir / 'results.json'}")
     return run_dir
