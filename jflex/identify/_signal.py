@@ -63,7 +63,7 @@ MOTION_SNR = 100.0  # the motion's band ends where its angle spectrum falls to 1
 REPEATS = 0.05  # a column whose reading stays the same over 5 % of its steps or more while it moves
 REPEAT_RUN = 50  # (in holds of at most 50 steps: a longer one is a rest) is quantised coarsely
 POWER_SHARE = 0.999  # ... and its motion band is held within POWER_SPAN x where this share of its power lies
-POWER_SPAN = 3.0
+POWER_SPAN = 2.0
 
 
 def _repeats(q) -> np.ndarray:
