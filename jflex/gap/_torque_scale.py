@@ -40,7 +40,7 @@ def dead_channels(s, names) -> dict:
     """``{channel: reason}``: the torque channels of set ``s`` whose measured spread is below
     :data:`DEAD_SPREAD` of the nominal (CAD) model's spread along the same motion, where the model
     predicts a torque of its own (:data:`OWN_SHARE` of the set's largest joint spread), and whose
-    reading does not follow the prediction (\|correlation\| below :data:`FOLLOWS`; a channel that does
+    reading does not follow the prediction (absolute correlation below :data:`FOLLOWS`; a channel that does
     is on a wrong scale, :func:`torque_scale_suspects`)."""
     F = T._filtered(s, "F0")
     nom = F.std(axis=0)
