@@ -152,6 +152,10 @@ def _on_device(x):
     return jax.device_put(np.asarray(x, dtype=float))
 
 
+# the heaviest moving machines weigh about 1e7 kg; a link beyond this is a unit or typing slip
+MAX_MASS_KG = 1e9
+
+
 def make_robot(
     *,
     joint_names: Sequence[str],
@@ -182,6 +186,9 @@ def make_robot(
     ``mimic``: ``(joint, leader, multiplier, offset)`` per coupled joint, by name: ``joint`` moves at
     ``multiplier * q_leader + offset`` and has no coordinate of its own (see :class:`Robot`)."""
     n = len(parents)
+    if n == 0:
+        raise ParameterError("Robot: no joints (parents is empty); expected at least one moving joint")
+
     def arr(x, shape, field):
         a = np.asarray(x, dtype=float)
         if a.shape != shape:
@@ -202,6 +209,13 @@ def make_robot(
     inertia = np.zeros((n, 10)) if inertia is None else arr(inertia, (n, 10), "inertia")
     for i in range(n if check_physical else 0):
         check_inertia(inertia[i], f"link '{link_names[i]}'")
+    for i in range(n):
+        # finite but absurd: the inverse dynamics square such numbers (kinetic energy, the regressor's
+        # Gram matrix) and overflow, and what follows reads inf or a constant torque
+        if abs(inertia[i, 0]) > MAX_MASS_KG or np.abs(inertia[i, 4:]).max() > MAX_MASS_KG * 1e3:
+            raise ParameterError(f"link '{link_names[i]}': mass {inertia[i, 0]:.3g} kg, rotational inertia up to "
+                                 f"{np.abs(inertia[i, 4:]).max():.3g} kg m^2: expected a machine's (mass at most "
+                                 f"{MAX_MASS_KG:.0e} kg, inertia at most {MAX_MASS_KG * 1e3:.0e} kg m^2; a unit slip?)")
     nf = len(frame_names)
     fR = np.tile(np.eye(3), (nf, 1, 1)) if frame_R is None else arr(frame_R, (nf, 3, 3), "frame_R")
     fp = np.zeros((nf, 3)) if frame_p is None else arr(frame_p, (nf, 3), "frame_p")

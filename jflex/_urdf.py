@@ -383,6 +383,27 @@ def _locked_values(fname, by_name, lock, joints, mimic):
     return values, coupled
 
 
+def _warn_massless(fname, inertia, joint_names, link_names, parents) -> None:
+    """Warn, naming the link, of a moving body without mass or inertia (its fixed children merged
+    in). Such a link is legal (a frame on a joint: Pinocchio loads it), so it is not refused; but
+    when nothing below its joint has mass either, the model gives that joint no inertial torque at
+    all, and a measured torque there reads as a wrong torque scale or a missing effect."""
+    n = len(joint_names)
+    empty = [not np.any(np.asarray(inertia[i])) for i in range(n)]
+    carried = list(empty)  # True: nothing at or below body i has mass
+    for i in reversed(range(n)):  # parents precede their children
+        if not carried[i] and parents[i] >= 0:
+            carried[parents[i]] = False
+    for i in range(n):
+        if empty[i]:
+            warnings.warn(
+                f"{fname}: link '{link_names[i]}' (moved by joint '{joint_names[i]}') has zero mass and inertia"
+                + (f"; nothing below joint '{joint_names[i]}' has mass, so the model gives it no inertial torque "
+                   "(expected the link's <inertial>, unless the joint moves only a frame)" if carried[i] else
+                   " (a frame on a joint is legal; a real link needs its <inertial>)"),
+                UserWarning, stacklevel=4)
+
+
 def _from_element(root, fname, gravity, lock=None, joints=None, mimic="coupled", floating=None, strict=False) -> Robot:
     links, by_name, children, root_link = _parse_tree(root, fname)
     if floating not in (None, "fixed", "refuse"):
@@ -484,6 +505,7 @@ def _from_element(root, fname, gravity, lock=None, joints=None, mimic="coupled",
         raise URDFError(
             f"{fname}: no moving joints (revolute, continuous or prismatic)" + (" left after lock/joints" if locked else "")
         )
+    _warn_massless(fname, inertia, joint_names, link_names, parents)
     lims = np.array(lims)
     try:
         return make_robot(

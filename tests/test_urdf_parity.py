@@ -500,7 +500,8 @@ def test_nonphysical_inertia_warns_naming_the_link_or_strict_refuses():
 
 
 FLOATING = """<robot name="f">
-  <link name="world"/><link name="pelvis"/><link name="leg"/>
+  <link name="world"/><link name="pelvis"/>
+  <link name="leg"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
   <joint name="root" type="floating"><parent link="world"/><child link="pelvis"/><origin xyz="0 0 1"/></joint>
   <joint name="hip" type="revolute"><parent link="pelvis"/><child link="leg"/><axis xyz="0 1 0"/>
     <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import re
+import warnings
 
 import numpy as np
 
@@ -63,6 +64,7 @@ class Case:
     datasets: list
     noise: dict
     options: dict
+    warnings: list = dataclasses.field(default_factory=list)
 
     def split(self, split: str, kind: str | None = None) -> list[Dataset]:
         """The data sets of ``split`` (``train``/``validation``), of ``kind`` if given."""
@@ -113,6 +115,15 @@ def _num(arr, path, field, *, ndim=None, complex_ok=False, allow_nan=False):
     if bad.any() and not allow_nan:
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
         raise DataError(f"{path}: field '{field}': contains NaN/inf, the first at index {idx}")
+    # finite values whose squares overflow: every gap measure sums squares (a relative RMS), which
+    # would turn inf and the gap NaN
+    fin = np.abs(a[~bad]) if bad.any() else np.abs(a)
+    if fin.size:
+        with np.errstate(over="ignore"):
+            energy = float(np.sum(np.square(fin)))
+        if not np.isfinite(energy):
+            raise DataError(f"{path}: field '{field}': magnitudes up to {float(fin.max()):.3g} overflow the squared "
+                            "sums of the gap measures; expected values in SI units (a unit or scale slip?)")
     return a.astype(complex if np.iscomplexobj(a) else float)
 
 
@@ -213,6 +224,8 @@ def _frf(arrs, path, robot):
         if k not in arrs:
             raise DataError(f"{path}: field '{k}': missing (an frf data set needs q0, freq (F,) [Hz], H (F, 3, 3))")
     f = _num(arrs["freq"], path, "freq", ndim=1)
+    if f.size == 0:
+        raise DataError(f"{path}: field 'freq': empty; expected at least one frequency line")
     if np.any(f <= 0) or np.any(np.diff(f) <= 0):
         raise DataError(f"{path}: field 'freq': frequencies must be > 0 Hz and strictly increasing")
     H = _num(arrs["H"], path, "H", ndim=3, complex_ok=True)
@@ -234,6 +247,8 @@ def _modal(arrs, path, robot):
         if k not in arrs:
             raise DataError(f"{path}: field '{k}': missing (a modal data set needs q0, freq (M,) [Hz], zeta (M,))")
     f = _num(arrs["freq"], path, "freq", ndim=1)
+    if f.size == 0:
+        raise DataError(f"{path}: field 'freq': the modal table is empty; expected at least one mode")
     z = _num(arrs["zeta"], path, "zeta", ndim=1, allow_nan=True)
     if np.any(f <= 0):
         raise DataError(f"{path}: field 'freq': natural frequencies must be > 0 Hz")
@@ -561,11 +576,24 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
     base = file.parent
     spec = validate(CaseSpec, load_yaml(file), file, context={"folder": base})
-    if isinstance(spec.robot, RobotSpec):
-        robot = _load_reduced_robot(spec.robot, base, file, allow_outside)
-    else:
-        robot = _load_robot(spec.robot, base, file, allow_outside)
+    # the robot's warnings (a massless link, a non-physical inertia) are the user's to see, and the
+    # report's: passed on, and kept
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if isinstance(spec.robot, RobotSpec):
+            robot = _load_reduced_robot(spec.robot, base, file, allow_outside)
+        else:
+            robot = _load_robot(spec.robot, base, file, allow_outside)
+    notes = []
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if issubclass(w.category, UserWarning):
+            notes.append(str(w.message))
     _refuse_mimic(robot, file)
+    unknown = [j for j in spec.options.keep_channels if j not in robot.joint_names]
+    if unknown:
+        raise _err(file, "options.keep_channels", f"unknown joints {unknown}; expected joint names of the model "
+                   f"{list(robot.joint_names)}")
     if spec.robot_inertia is not None:
         # link parameters realised from identified base parameters need not be physically
         # consistent per link (only their combinations are identified): taken as they are
@@ -633,7 +661,98 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         raise _err(file, "datasets", "no data set has split: train (the nominal model is fitted on it)")
     if not any(d.split == "validation" for d in datasets):
         raise _err(file, "datasets", "no data set has split: validation (the gap is judged on held-out data)")
+    _refuse_long_delay(nominal, datasets, file)
+    sets_notes = _held_out_notes(spec, datasets) + _short_training_notes(spec, nominal, datasets, robot)
+    for d, msg in sets_notes:
+        warnings.warn(msg, UserWarning, stacklevel=2)
+        d.conditioning.setdefault("warnings", []).append(msg)
+    if notes:  # the robot's: with the first training set's, where the report's data notes show them
+        first = next(d for d in datasets if d.split == "train")
+        first.conditioning["warnings"] = notes + first.conditioning.get("warnings", [])
     # noise: only what the case states (the diagnosis reports a default as such); options: all,
     # defaults filled
     noise = spec.noise.model_dump(exclude_none=True)
-    return Case(file, robot, tool, nominal, datasets, noise, spec.options.model_dump())
+    return Case(file, robot, tool, nominal, datasets, noise, spec.options.model_dump(),
+                notes + [m for _, m in sets_notes])
+
+
+DELAY_SHARE = 0.1  # a nominal sensor delay is a small lag of the record, at most this share of it
+
+
+def _duration(d) -> float | None:
+    t = d.arrays.get("t") if d.kind in ("torque", "response") else None
+    return None if t is None or np.size(t) < 2 else float(np.max(t) - np.min(t))
+
+
+def _refuse_long_delay(nominal, datasets, file) -> None:
+    """A nominal ``sensor_delay`` shifts every record by its value: one of a sizeable share of the
+    shortest record leaves nothing to compare (and is a unit slip: ms written as s)."""
+    spans = [(_duration(d), d.name) for d in datasets if _duration(d)]
+    if not spans:
+        return
+    span, name = min(spans)
+    for i, e in enumerate(nominal):
+        if e["effect"] == "sensor_delay" and "value" in e and float(np.max(e["value"])) > DELAY_SHARE * span:
+            raise _err(file, f"nominal_effects[{i}].value", f"a delay of {float(np.max(e['value'])):.4g} s against the "
+                       f"record '{name}' of {span:.4g} s: expected a delay well below the record length (at most "
+                       f"{DELAY_SHARE:g} x it, {DELAY_SHARE * span:.3g} s; a delay is given in seconds)")
+
+
+def _span(window):
+    a, b = (window or [0.0, None])
+    return float(a), float("inf") if b is None else float(b)
+
+
+def _held_out_notes(spec, datasets) -> list:
+    """``(validation set, sentence)`` for each validation set that holds the same samples as a
+    training set (the same file and overlapping windows, or the same torques): the gap is then
+    judged on data the model was fitted on, and nothing is held out."""
+    out = []
+    for v, vs in zip(datasets, spec.datasets):
+        if v.split != "validation":
+            continue
+        for t, ts in zip(datasets, spec.datasets):
+            if t.split != "train" or t.kind != v.kind:
+                continue
+            (a0, a1), (b0, b1) = _span(ts.window), _span(vs.window)
+            overlap = min(a1, b1) - max(a0, b0)
+            same_file = tuple(t.files) == tuple(v.files) and overlap > 0
+            ta, va = t.arrays.get("tau"), v.arrays.get("tau")
+            same_data = (ta is not None and va is not None and np.shape(ta) == np.shape(va)
+                         and np.array_equal(ta, va))
+            if same_file or same_data:
+                how = (f"overlapping windows of {', '.join(p.name for p in v.files)}" if same_file and not same_data
+                       else "the same samples")
+                out.append((v, f"validation set '{v.name}' and training set '{t.name}' hold {how}: nothing is held "
+                               "out, so the gap is judged on data the model was fitted on (an effect can look "
+                               "explained that held-out data would not confirm); expected a validation set of "
+                               "other samples (another log, or 'jflex case init --hold-out')"))
+                break
+    return out
+
+
+# equations (training samples x torque channels) per fitted parameter below which the nominal
+# identification is warned of: a least-squares fit of p parameters on r rows leaves r - p degrees
+# of freedom for the residual (and the noise floor read off it)
+ROWS_PER_PARAMETER = 10
+
+
+def _short_training_notes(spec, nominal, datasets, robot) -> list:
+    """``(training set, sentence)`` when the torque training data are too short to identify the
+    nominal model: fewer than ``ROWS_PER_PARAMETER`` equations per parameter fitted (10 inertial
+    parameters per link when they are refitted, one coefficient per nominal friction term and
+    joint)."""
+    train = [d for d in datasets if d.split == "train" and d.kind == "torque"]
+    if not train:
+        return []
+    n = robot.nq
+    params = (10 * n if spec.options.refit_inertia else 0) + sum(
+        len(e["joints"]) for e in nominal if e["effect"] != "joint_flexibility" and "value" not in e)
+    rows = sum(int(np.shape(d.arrays["tau"])[0]) * n for d in train)
+    if params == 0 or rows >= ROWS_PER_PARAMETER * params:
+        return []
+    samples = sum(int(np.shape(d.arrays["tau"])[0]) for d in train)
+    return [(train[0], f"the torque training data are too short to identify the nominal model: {samples} samples x "
+                       f"{n} joints = {rows} equations for {params} parameters (expected at least "
+                       f"{ROWS_PER_PARAMETER} equations per parameter, {-(-ROWS_PER_PARAMETER * params // n)} samples "
+                       "here); the fit follows the noise and the verdict is weak")]

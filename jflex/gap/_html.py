@@ -87,6 +87,8 @@ def data_notes(r: dict) -> list[str]:
             if "merge" in rest and isinstance(rest["merge"], dict):
                 m = rest.pop("merge")
                 out.append(f"'{k}' merged from {', '.join(map(str, m.get('files', [])))}: {m.get('merged', '')}.")
+            for w in rest.pop("warnings", None) or ():
+                out.append(f"Warning ('{k}'): {w}")
             if "window_s" in rest:
                 w = rest.pop("window_s")
                 a, b = (list(w) + [None, None])[:2]
