@@ -12,6 +12,7 @@ time column, and they are merged on time (:func:`jflex.data.merge_on_time`).
 
 from __future__ import annotations
 
+import collections
 import csv
 import pathlib
 
@@ -24,6 +25,7 @@ from ._record import Channel, Record
 
 DELIMITERS = {",": ",", ";": ";", "tab": "\t", "space": None}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+MAX_COLUMNS = 10_000  # a log's header at most this wide (see Table)
 
 
 class Table:
@@ -40,6 +42,14 @@ class Table:
         lines = [(k + 1, s) for k, s in enumerate(text.splitlines()) if s.strip() and not s.lstrip().startswith("#")]
         if not lines:
             raise DataError(f"{path}: no header line (the file is empty or holds only '#' comments)")
+        first = lines[0][1]
+        declared = max(first.count(d) for d in (",", ";", "\t")) + 1 if delimiter is not None or sniff else 0
+        declared = max(declared, len(first.split()) if delimiter is None and not sniff else 0)
+        if declared > MAX_COLUMNS:
+            # refused by its header before any row is split: every row is parsed whole, and a file
+            # this wide (a dump of every signal) takes minutes for the few columns a case maps
+            raise DataError(f"{path}: line {lines[0][0]}: the header declares {declared} columns; expected at most "
+                            f"{MAX_COLUMNS} (keep the columns the case maps, e.g. with a spreadsheet or 'cut')")
         if sniff and delimiter is None:
             counts = {d: lines[0][1].count(d) for d in (",", ";", "\t")}
             best = max(counts, key=counts.get)
@@ -47,11 +57,17 @@ class Table:
         if delimiter is None:
             cells = [s.split() for _, s in lines]
         else:
-            cells = list(csv.reader((s for _, s in lines), delimiter=delimiter))
+            reader = csv.reader((s for _, s in lines), delimiter=delimiter)
+            try:
+                cells = list(reader)
+            except csv.Error as exc:  # a field over csv's size limit (131072 characters), a stray NUL
+                k = lines[min(reader.line_num, len(lines)) - 1][0]
+                raise DataError(f"{path}: line {k}: not a CSV row of numbers ({exc}); expected a log of numeric "
+                                "fields") from None
         self.header = [h.strip() for h in cells[0]]
         if any(not h for h in self.header):
             raise DataError(f"{path}: line {lines[0][0]}: the header has an empty column name ({self.header})")
-        dup = sorted({h for h in self.header if self.header.count(h) > 1})
+        dup = sorted(h for h, c in collections.Counter(self.header).items() if c > 1)
         if dup:
             raise DataError(f"{path}: line {lines[0][0]}: column names {dup} appear more than once in the header")
         self.lines = [k for k, _ in lines[1:]]
@@ -67,7 +83,14 @@ class Table:
         i = self.header.index(name)
         cells = [r[i].strip() or "nan" for r in self.rows]
         try:
-            return np.asarray(cells, dtype=float)
+            values = np.asarray(cells, dtype=float)
+            # Python's float() reads '1_000' as 1000 (a literal's digit grouping); in a log it is a
+            # typing slip or another field's separator, not a number
+            k = next((k for k, c in zip(self.lines, cells) if "_" in c), None)
+            if k is not None:
+                raise DataError(f"{self.path}: column {name!r}, line {k}: expected a number, got "
+                                f"{cells[self.lines.index(k)]!r} (digits grouped by '_' are not read)")
+            return values
         except ValueError:
             for k, c in zip(self.lines, cells):
                 try:

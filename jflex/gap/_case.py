@@ -101,8 +101,11 @@ def _resolve_joints(spec, robot, file, field) -> tuple[str, ...]:
     return tuple(out)
 
 
-def _load_npz(path: pathlib.Path, field: str, case_file) -> dict:
-    return load_npz_fields(path, field, case_file)
+# the fields each kind of NPZ data set may hold (docs/case_format.md): only these are read
+NPZ_KEYS = {"torque": ("t", "q", "tau", "qd", "qdd", "tau_repeats", "joints"),
+            "frf": ("q0", "freq", "H", "H_repeats", "joints"),
+            "modal": ("q0", "freq", "zeta", "shapes", "joints"),
+            "response": ("t", "tau", "y", "channels", "q0", "y_repeats")}
 
 
 def _num(arr, path, field, *, ndim=None, complex_ok=False, allow_nan=False):
@@ -598,7 +601,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         # link parameters realised from identified base parameters need not be physically
         # consistent per link (only their combinations are identified): taken as they are
         ip = case_path(base, spec.robot_inertia, "robot_inertia", file, allow_outside)
-        arr = _load_npz(ip, "robot_inertia", file)
+        arr = load_npz_fields(ip, "robot_inertia", file, ("inertia",))
         if "inertia" not in arr:
             raise DataError(f"{ip}: field 'inertia': missing ((n, 10) link parameters in Pinocchio's order)")
         P = _num(arr["inertia"], ip, "inertia", ndim=2)
@@ -629,7 +632,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         elif fmt == "uff":
             rec = Record(uff_arrays(fpath, d, robot, file, fld))
         else:
-            rec = read_npz(fpath, f"{fld}.file", file)
+            rec = read_npz(fpath, f"{fld}.file", file, NPZ_KEYS[d.kind])
         if d.window is not None:
             rec.arrays = _window(rec.arrays, d.window, fpath, fld, file)
             rec.conditioning["window_s"] = list(d.window)

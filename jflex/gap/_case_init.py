@@ -5,6 +5,7 @@ which :func:`jflex.gap.load_case` refuses by field until it is filled in."""
 
 from __future__ import annotations
 
+import collections
 import pathlib
 import re
 import shutil
@@ -58,6 +59,7 @@ def _joint_of(col: str, joints: list[str]) -> str | None:
 def guess_columns(header: list[str], joints: list[str]) -> dict:
     """``{time, position, velocity, torque, current: [columns], units}`` guessed from ``header``."""
     out = {"time": None, "position": {}, "velocity": {}, "torque": {}, "current": [], "units": {}}
+    count = collections.Counter(header)
     for col in header:
         words = [w for w in _words(col) if not w.isdigit()]
         if out["time"] is None and any(w in TIME_WORDS for w in words) and _joint_of(col, joints) is None:
@@ -67,7 +69,7 @@ def guess_columns(header: list[str], joints: list[str]) -> dict:
             continue
         role = next((r for r, ws in ROLE_WORDS.items() if any(w in ws for w in words)), None)
         j = _joint_of(col, joints)
-        if role is None and j is not None and _flat(col) == _flat(j) and header.count(col) == 1:
+        if role is None and j is not None and _flat(col) == _flat(j) and count[col] == 1:
             role = "position"  # a bare joint name: a log of angles headed by the joints' names
         if role is None or j is None or j in out[role]:
             continue
