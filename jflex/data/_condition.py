@@ -54,7 +54,9 @@ def clean_stamps(t, arrays: dict, where: str):
     ``repeated_rows`` (stale rows removed: rows equal to the previous one in every channel at a
     later stamp, a logger that wrote its last sample again, in runs of at most ``STALE_RUN``; kept,
     they hold the motion still for a step and put a kink into every derivative. The resampling
-    interpolates across them. A longer run of equal rows is a robot at rest and stays)."""
+    interpolates across them. A longer run of equal rows is a robot at rest and stays). With stale
+    rows, it also gives the logged stamps' ``longest_step`` and ``dropped_samples`` (as
+    :func:`resample_uniform` reports them, before the stale rows are let go)."""
     t = np.asarray(t, float)
     dt = np.diff(t)
     if t.size > 1 and np.all(dt == 0):
@@ -76,28 +78,37 @@ def clean_stamps(t, arrays: dict, where: str):
     else:
         stale = np.zeros(t.size, bool)
     report = {"repeated_stamps": int((~keep).sum()), "repeated_rows": int(stale.sum())}
+    if stale.any():
+        # the clock's own longest step and drops (as resample_uniform reports them), before the stale
+        # rows' stamps are let go: those were logged, only their values were old
+        d = np.diff(t[keep])
+        h = float(np.median(d))
+        report.update(longest_step=float(d.max() / h), dropped_samples=int(np.sum(np.round(d[d > DROP * h] / h) - 1)))
     keep &= ~stale
     if keep.all():
         return t, arrays, report
     return t[keep], {k: np.asarray(a)[keep] for k, a in arrays.items()}, report
 
 
-def _gap_band(t, q, h: float) -> float | None:
-    """The motion band [Hz] of angles ``q`` (N, m) at stamps ``t`` (median step ``h``), read off
-    the longest stretch without a gap or a dropped sample (:func:`jflex.identify.motion_band`); None
-    when that stretch is too short to tell (under 256 samples)."""
-    from ..identify._signal import motion_band
+def _gap_band(t, q, h: float, max_gap: float) -> float | None:
+    """The band [Hz] of angles ``q`` (N, m) at stamps ``t`` (median step ``h``): where
+    ``ENERGY_FRACTION`` of their power lies (:func:`jflex.identify._signal.power_band`) over the
+    longest stretch without a step over ``max_gap`` median steps, at its mean step (jitter and
+    single dropped samples hardly move it; a band against the angle noise would, jitter reading as
+    noise); None when that stretch is too short to tell (under 256 samples)."""
+    from ..identify._signal import power_band
 
     q = np.asarray(q, float).reshape(t.size, -1)
     if not q.shape[1]:
         return None
-    brk = np.flatnonzero(np.diff(t) > DROP * h)
+    brk = np.flatnonzero(np.diff(t) > max_gap * h)
     edges = np.concatenate([[0], brk + 1, [t.size]])
     k = int(np.argmax(np.diff(edges)))
     lo, hi = int(edges[k]), int(edges[k + 1])
     if hi - lo < 256:
         return None
-    return motion_band(q[lo:hi], float(np.mean(np.diff(t[lo:hi]))))
+    band = power_band(q[lo:hi], float(np.mean(np.diff(t[lo:hi]))), ENERGY_FRACTION)
+    return band if band > 0 else None
 
 
 def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max_gap: float = MAX_GAP,
@@ -107,8 +118,8 @@ def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max
     steps that dropped nothing (the median of jittered steps is a noisier estimate of the rate).
 
     A gap (a step over ``max_gap`` median steps) is bridged when it is shorter than ``BRIDGE`` of
-    the shortest period of the motion (the band of the angles ``arrays[motion]``, read off the
-    longest stretch without a gap; :func:`jflex.identify.motion_band`); longer gaps, or any gap
+    the shortest period of the motion (1 / the band holding ``ENERGY_FRACTION`` of the power of the
+    angles ``arrays[motion]``, read off the longest stretch without a gap); longer gaps, or any gap
     when there are no angles to judge it by, are refused, every one named with its time and length
     (the log is then cut there into several data sets).
 
@@ -137,7 +148,7 @@ def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max
         return t, arrays, report
     gaps = np.flatnonzero(dt > max_gap * h)
     if gaps.size:
-        band = _gap_band(t, arrays[motion], h) if motion is not None and motion in arrays else None
+        band = _gap_band(t, arrays[motion], h, max_gap) if motion is not None and motion in arrays else None
         longest = BRIDGE / band if band else 0.0
         report["gaps"] = [{"t_s": float(t[k]), "length_s": float(dt[k]), "steps": float(dt[k] / h)} for k in gaps]
         if band:
