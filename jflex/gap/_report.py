@@ -175,7 +175,7 @@ def _fmt(x, nd=2):
     return "-" if x is None else (f"{x:.{nd}f}" if isinstance(x, float) else str(x))
 
 
-def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None = None) -> str:
+def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None = None, prismatic=()) -> str:
     L = [f"# Gap diagnosis{' of ' + robot if robot else ''}: {r['case']}", "",
          "The same report with its figures and the terms explained: [report.html](report.html).", ""]
     L.append(f"**Validation gap:** {r['gap_before']:.2f} % NRMSE before, {r['gap_after']:.2f} % after; noise floor "
@@ -227,6 +227,14 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
               "and only what lies beyond that tolerance can be named; holding the inertias fixed "
               "(`options.refit_inertia: false`, when the CAD is trusted) gives the data to the candidates:", ""]
         L += [f"- {h['effect']}" + (f" at {h['joint']}" if h["joint"] else "") for h in r["confounded_with_inertia_refit"]]
+        both = [h for h in r["confounded_with_inertia_refit"]
+                if any(s["effect"] == h["effect"] and s.get("joint") == h["joint"] for s in r["selected"])]
+        for h in both:
+            at = f" at {h['joint']}" if h["joint"] else ""
+            L += ["", f"{h['effect'].capitalize()}{at} is both confounded with the refit and selected: the refit "
+                  f"absorbed the part of it the CAD tolerance allows (a few per cent of each link's mass), and the "
+                  f"selection named {h['effect']}{at} for what lay beyond that tolerance; its fitted value is that "
+                  "excess over the refitted inertias, not the whole effect."]
     if r["ambiguous"]:
         L += ["", "## Ambiguous", ""]
         for a in r["ambiguous"]:
@@ -269,7 +277,8 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     L += ["", "## Gap as effects are added", "", "| step | validation gap [%] | excess over noise [%] |", "|---|---|---|"]
     for s in r["steps"]:
         L.append(f"| {s['added'] or 'nominal'} | {s['gap']:.2f} | {s['excess']:.2f} |")
-    L += ["", "## Fitted parameters of the final model", "", "```", _params(_without_payload(r["parameters"], payload)), "```", ""]
+    L += ["", "## Fitted parameters of the final model", "", "```",
+          _params(prismatic_units(_without_payload(r["parameters"], payload), set(prismatic))), "```", ""]
     if payload:
         # the payload once, as the summary gives it (mass, centre of mass in the tool frame, units)
         L += [f"Payload: {_html.payload_line(payload)}.", ""]
@@ -306,6 +315,32 @@ def _without_payload(params: dict, payload) -> dict:
         return params
     return {side: {k: v for k, v in grp.items() if k != "payload"} if isinstance(grp, dict) else grp
             for side, grp in params.items()}
+
+
+# a prismatic joint's generalized force is a force and its coordinate a length: the torque-side
+# units the effects state per joint (N m, per rad) read N and per m there
+_LINEAR_UNITS = (("[N m s/rad]", "[N s/m]"), ("[N m/rad]", "[N/m]"), ("[N m]", "[N]"), ("[kg m^2]", "[kg]"))
+
+
+def prismatic_units(p, prismatic) -> dict:
+    """The parameters dict ``p`` with the units of the effects placed at a ``prismatic`` joint (a
+    key ``effect@joint``) in N, N/m, N s/m, kg."""
+    out = {}
+    for k, v in p.items():
+        at = str(k).rsplit("@", 1)[-1] if "@" in str(k) else None
+        if isinstance(v, dict) and at is not None and at in prismatic:
+            v = {_linear_unit(a): b for a, b in v.items()}
+        elif isinstance(v, dict):
+            v = prismatic_units(v, prismatic)
+        out[k] = v
+    return out
+
+
+def _linear_unit(key):
+    key = str(key)
+    for a, b in _LINEAR_UNITS:
+        key = key.replace(a, b)
+    return key
 
 
 def _params(p, ind=0):
@@ -356,7 +391,8 @@ def write_report(diag, out_dir) -> pathlib.Path:
         r["plot_error"] = f"{type(exc).__name__}: {exc}"
         write_results(out, r, "diagnosis.json")
     path = out / "report.md"
-    path.write_text(markdown(r, [f["file"] for f in figures], robot=robot, payload=payload))
+    prismatic = [j for j, k in zip(pb.robot.joint_names, pb.robot.joint_types) if k == "prismatic"]
+    path.write_text(markdown(r, [f["file"] for f in figures], robot=robot, payload=payload, prismatic=prismatic))
     set_gaps = {}
     if ev0 is not None:
         for k in ev0:
@@ -367,3 +403,21 @@ def write_report(diag, out_dir) -> pathlib.Path:
     (out / "report.html").write_text(_html.page(r, out, figures, robot_name=robot, nominal_effects=pb.case.nominal_effects,
                                                 payload=payload, modal_tables=tables, set_gaps=set_gaps))
     return path
+
+
+def add_figures(out_dir, figures, title: str, intro: str = "") -> None:
+    """Link figures written after the report (``[(file relative to out_dir, caption)]``) in
+    ``report.md`` and embed them in ``report.html``, under the heading ``title``."""
+    out = pathlib.Path(out_dir)
+    md = out / "report.md"
+    if md.is_file():
+        lines = ["", f"## {title}", ""] + ([intro, ""] if intro else [])
+        lines += [f"![{f}]({f})\n\n{cap}\n" for f, cap in figures]
+        md.write_text(md.read_text() + "\n".join(lines) + "\n")
+    page = out / "report.html"
+    if page.is_file():
+        text = page.read_text()
+        block = (f"<h2>{_html._e(title)}</h2>" + (f"<p>{_html._e(intro)}</p>" if intro else "")
+                 + "".join(_html._figure(out, {"file": f, "caption": cap}) for f, cap in figures))
+        end = text.rfind("</body>")
+        page.write_text(text[:end] + block + "\n" + text[end:] if end >= 0 else text + block)
