@@ -94,8 +94,9 @@ def _update(h, obj, depth: int, seen: set) -> None:
     if len(leaves) == 1 and leaves[0] is obj:  # not a pytree: its type and printed form
         h.update(f"{type(obj).__module__}.{type(obj).__qualname__}".encode())
         h.update(_ADDR.sub("", repr(obj)).encode())
-        if dataclasses.is_dataclass(obj) or isinstance(obj, types.SimpleNamespace):
-            # plain data holders: their fields, which a repr may abbreviate (arrays) or leave out
+        if dataclasses.is_dataclass(obj) or hasattr(obj, "__dict__"):
+            # data holders (dataclasses, namespaces, any object's attributes, e.g. a global config
+            # object a function reads cfg.gain from): their fields, which a repr leaves out
             _update(h, dict(vars(obj)) if hasattr(obj, "__dict__") else
                     {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}, depth, seen)
         return
