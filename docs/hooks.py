@@ -33,9 +33,14 @@ def public_names(module_name):
 
 
 @functools.lru_cache(maxsize=None)
+def _static_package(root):
+    return griffe.load("jflex", search_paths=[root], resolve_aliases=False)
+
+
 def _static_members(module_name, root):
     """The names griffe finds in ``module_name`` by reading the source (what mkdocstrings sees)."""
-    return set(griffe.load(module_name, search_paths=[root], resolve_aliases=False).members)
+    package = _static_package(root)
+    return set((package[module_name.removeprefix("jflex.")] if module_name != "jflex" else package).members)
 
 
 def defining_path(module_name, name):
