@@ -396,9 +396,26 @@ class Seed001RpArmConfig(_Strict):
     filled_why: dict[str, str] = Field(default_factory=dict, description="why each FILLED value (copied to results)")
 
 
+def quick_figures(res) -> dict:
+    """The key figures of ``--quick`` against the paper, loosely: Table 5's model means of q1 and
+    dq1 (to which the FILLED torque was fitted), the free length's mean, the 2 mm peak link
+    deflection of Sec. 5 (which set the brake) and the drive's 65 mm/s limit, on the variant with
+    a rigid hub (the hub's modes, at 2.2 and 8 krad/s, move none of them by more than a few %)."""
+    v = res["variants"]["F.L-R.H-F.J"]
+    t5 = v["table5_vs_paper_model"]
+    return {
+        "q1 mean [deg] (Table 5: 54.26)": (t5["q1"]["mean"], 54.26 * 0.95, 54.26 * 1.05),
+        "dq1 mean [deg/s] (Table 5: 17.17)": (t5["dq1"]["mean"], 17.17 * 0.9, 17.17 * 1.1),
+        "eta1 mean [mm] (Table 5: 373.9)": (t5["eta1"]["mean"], 373.9 * 0.98, 373.9 * 1.02),
+        "max link deflection [mm] (Sec. 5: 2)": (v["max_link_deflection_mm"], 1.6, 2.4),
+        "max prismatic speed [mm/s] (Sec. 2: 65)": (v["max_prismatic_speed_mm_per_s"], 60.0, 66.0),
+    }
+
+
 def main(argv=None):
     return jflex.experiment_cli("seed001_rp_arm", HERE.parent / "configs" / "seed001_rp_arm_quick.yaml", run, argv,
-                                schema=Seed001RpArmConfig)
+                                schema=Seed001RpArmConfig,
+                                quick=(HERE.parent / "configs" / "seed001_rp_arm_one_variant.yaml", quick_figures))
 
 
 if __name__ == "__main__":

@@ -21,6 +21,12 @@ SLOW = os.environ.get("JFLEX_SLOW", "0") == "1"
 def pytest_collection_modifyitems(config, items):
     import pytest
 
+    # the quick experiments (minutes in all) run in CI's step of their own, not in the suite
+    if "experiments" not in (config.getoption("markexpr") or ""):
+        skip = pytest.mark.skip(reason="the experiments' quick runs: select them with -m experiments")
+        for item in items:
+            if "experiments" in item.keywords:
+                item.add_marker(skip)
     if SLOW:
         return
     skip = pytest.mark.skip(reason="heavy case: set JFLEX_SLOW=1 to run it")

@@ -171,10 +171,21 @@ def test_demo_installed(venv, tmp_path):
 ALL = sorted(p.stem for p in (ROOT / "experiments").glob("*.py") if not p.name.startswith("_"))
 
 
+@pytest.mark.experiments
+@pytest.mark.parametrize("name", ALL)
+def test_every_experiment_quick_installed(venv, tmp_path, name):
+    # each in its quick mode, which checks its key figures itself (exit 2 when one is off); up to
+    # a minute each, so CI runs them in a step of their own (.ci/run: pytest -m experiments)
+    _, jflex, work = venv
+    res = _run([str(jflex), "run", name, "--quick", "--out", str(tmp_path / name)], cwd=work, timeout=900)
+    checked = json.loads((tmp_path / name / "results.json").read_text())["quick_check"]
+    assert checked and all(row["ok"] for row in checked.values()), (checked, res.stdout[-2000:])
+
+
 @pytest.mark.heavy
 @pytest.mark.parametrize("name", ALL)
 def test_every_experiment_installed(venv, tmp_path, name):
-    # each at its default (quick) config; minutes each on two shared cores, hence JFLEX_SLOW=1 only
+    # each at its default config; minutes each on two shared cores, hence JFLEX_SLOW=1 only
     _, jflex, work = venv
     _run([str(jflex), "run", name, "--out", str(tmp_path / name)], cwd=work, timeout=3600)
     assert (tmp_path / name / "results.json").is_file() or any((tmp_path / name).iterdir())
