@@ -11,10 +11,13 @@ The tables, robots and postures are those of the MASc thesis "Posture Dependent 
 
 The nominal models are those of experiments/posture_modal.py (link parameters realised from the
 identified base parameters, Table 4.3/4.4 joint stiffness and damping, motors held); the case
-folders are written to ``configs/cases/`` (robot YAML with the realised link parameters + NPZ
-tables) so that ``jflex diagnose configs/cases/kr90_config1`` works on its own.
+folders (robot YAML with the realised link parameters + NPZ tables) are written into the run
+folder (``--cases DIR`` elsewhere: ``configs/cases/`` holds a copy, so that ``jflex diagnose
+configs/cases/kr90_config1`` works on its own). ``--quick`` checks the key figures loosely: the
+fitted common ratios (KR90 263.7, TX200 195.3), the KR90's 19.2 Hz mode unmatched and the
+TX200's error most correlated with the wrist angle q5.
 
-    python experiments/gap_seed003.py [--out DIR]
+    python experiments/gap_seed003.py [--out DIR] [--cases DIR] [--quick]
 """
 
 from __future__ import annotations
@@ -29,7 +32,6 @@ import jflex
 from jflex.gap import diagnose, write_report
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-CASES = ROOT / "configs" / "cases"
 
 
 def _seed_robot(cfg_name):
@@ -71,9 +73,9 @@ def _write_case(folder, rob, notes):
     (folder / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
 
 
-def kr90_case() -> pathlib.Path:
+def kr90_case(cases: pathlib.Path) -> tuple[pathlib.Path, float]:
     rob, robot, r = _seed_robot("kuka_kr90.yaml")
-    folder = CASES / "kr90_config1"
+    folder = cases / "kr90_config1"
     folder.mkdir(parents=True, exist_ok=True)
     _robot_yaml(folder, rob, robot, r)
     th = rob.thesis
@@ -88,12 +90,12 @@ def kr90_case() -> pathlib.Path:
     # only configuration 1 has the fourth mode: it is both the training and a validation set
     # (in-sample for that mode); configurations 2 and 3 are held out
     _write_case(folder, rob, "Table 4.6 (Exp. columns) of \"Posture Dependent Dynamics in Robotic Machining\" (MASc thesis) and the 19.2 Hz mode of configuration 1")
-    return folder
+    return folder, r
 
 
-def staubli_case() -> pathlib.Path:
+def staubli_case(cases: pathlib.Path) -> tuple[pathlib.Path, float]:
     rob, robot, r = _seed_robot("staubli_tx200.yaml")
-    folder = CASES / "tx200_wrist"
+    folder = cases / "tx200_wrist"
     folder.mkdir(parents=True, exist_ok=True)
     _robot_yaml(folder, rob, robot, r)
     th = rob.thesis
@@ -105,21 +107,39 @@ def staubli_case() -> pathlib.Path:
         np.savez(folder / f"modes_c{k + 1}.npz", q0=np.r_[rob.postures[k], 0.0, q5[k], 0.0], joints=names,
                  freq=f[o], zeta=np.array(th["damping_exp_pct"][k])[o] / 100)
     _write_case(folder, rob, "Table 4.5 (Exp.) of \"Posture Dependent Dynamics in Robotic Machining\" (MASc thesis) with the wrist posture of Table 4.1 recorded as extra joints")
-    return folder
+    return folder, r
+
+
+def quick_figures(summary) -> dict:
+    """The key figures and loose bounds around what the full run and the thesis give."""
+    kr, tx = summary["kr90_config1"], summary["tx200_wrist"]
+    near_19 = [u for u in kr["unmatched"] if u.startswith("mode") and abs(float(u.split("@")[1].split("Hz")[0]) - 19.2) < 0.5]
+    # the diagnosis lists the channels' posture correlations largest error first
+    top = tx["posture_correlations"][0] if tx["posture_correlations"] else ("", "", 0.0)
+    return {
+        "KR90 common gear ratio": (kr["gear_ratio"], 250.0, 280.0),  # 263.7
+        "TX200 common gear ratio": (tx["gear_ratio"], 185.0, 205.0),  # 195.3
+        "KR90 unmatched modes at 19.2 Hz": (len(near_19), 1, 3),
+        "TX200 largest error correlated with q5 first (1 = yes)": (float(top[1] == "joint5"), 1, 1),
+    }
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(prog="gap_seed003", description=__doc__.splitlines()[0])
     p.add_argument("--out", default=None)
+    p.add_argument("--cases", default=None, help="where to write the two case folders (default: the run folder)")
+    p.add_argument("--quick", action="store_true", help="check the key figures loosely (the run itself is under a minute)")
     args = p.parse_args(argv)
     run = jflex.make_run_dir("gap_seed003", args.out)
+    cases = pathlib.Path(args.cases) if args.cases else run / "cases"
     summary = {}
     for name, make in (("kr90_config1", kr90_case), ("tx200_wrist", staubli_case)):
-        folder = make()
+        folder, ratio = make(cases)
         diag = diagnose(folder, progress=lambda s: print(f"{name}: {s}", flush=True))
         write_report(diag, run / name)
         r = diag.result
         summary[name] = dict(
+            gear_ratio=ratio,
             gap_before=r["gap_before"], gap_after=r["gap_after"], unmatched=[w["channel"] + " " + w["dataset"] for w in r["unmatched_modes"]],
             selected=[(s["effect"], s["joint"] or s.get("link"), round(s["shrink"], 1)) for s in r["selected"]],
             ranking=[(s["effect"], s["joint"] or s.get("link"), round(s["shrink"], 1)) for s in r["ranking"][:5]],
@@ -128,6 +148,9 @@ def main(argv=None):
         )
         print(name, summary[name], flush=True)
     jflex.write_results(run, summary)
+    if args.quick:
+        summary["quick_check"] = jflex._runs.quick_check("gap_seed003", quick_figures(summary))
+        jflex.write_results(run, summary)
     print(f"gap_seed003: results in {run}")
 
 
