@@ -29,6 +29,7 @@ import numpy as np
 import yaml
 
 import jflex
+from jflex._runs import quick_check
 from jflex.gap import diagnose, write_report
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -149,7 +150,7 @@ def main(argv=None):
         print(name, summary[name], flush=True)
     jflex.write_results(run, summary)
     if args.quick:
-        summary["quick_check"] = jflex._runs.quick_check("gap_seed003", quick_figures(summary))
+        summary["quick_check"] = quick_check("gap_seed003", quick_figures(summary))
         jflex.write_results(run, summary)
     print(f"gap_seed003: results in {run}")
 
