@@ -13,8 +13,8 @@ class Channel:
     """One measured channel: ``name`` (``"tau:joint2"``: the field and the joint), its ``unit`` after
     conversion (SI), the ``source`` it was read from (a CSV column, a bag's joint, an NPZ field),
     the ``scale`` and ``offset`` applied (``value = scale * (raw - offset)``, before any coupling),
-    and the ``flags`` the conditioning raised (``dead``, ``flat``, ``stuck``, ``saturated``,
-    ``few_levels``, ``spikes``)."""
+    and the ``flags`` the conditioning raised (``dead``, ``flat``, ``stuck``, ``few_levels``: left out
+    of the gap; ``saturated``: its clipped samples masked, the rest kept; ``spikes``)."""
 
     name: str
     unit: str
