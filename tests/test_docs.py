@@ -5,6 +5,7 @@ public name of the documented modules; and the Python blocks of its pages run as
 
 import html.parser
 import importlib
+import importlib.util
 import pathlib
 import re
 import subprocess
@@ -71,11 +72,10 @@ def test_docs_site_loads_nothing_from_the_network(site):
 
 @pytest.mark.parametrize("page", sorted(API))
 def test_api_reference_has_every_public_name(site, page):
-    sys.path.insert(0, str(DOCS))
-    try:
-        from hooks import public_names, defining_path
-    finally:
-        sys.path.remove(str(DOCS))
+    spec = importlib.util.spec_from_file_location("jflex_docs_hooks", DOCS / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    public_names, defining_path = hooks.public_names, hooks.defining_path
     module = API[page]
     ids = set(re.findall(r'id="([^"]+)"', (site / "api" / page / "index.html").read_text(encoding="utf-8")))
     names = public_names(module)
