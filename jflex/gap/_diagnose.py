@@ -33,7 +33,7 @@ from ._inertia import inertia_prior, link_moves
 from ._response import cad_spread as cad_spread_response
 from ._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
-from ._selection import (MIN_GAP, MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWAP_SHRINK, forward_select, gap_summary,
+from ._selection import (FAMILY_ALPHA, SIGNIFICANCE, gap_uncertainty, significance_factor, MIN_GAP, MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWAP_SHRINK, forward_select, gap_summary,
                          ic_delta, decisive, swap_rivals, is_significant, joints_beyond_floor, pooled_upper, rank_entries, step_record, stop_reason, verdict, vetoed,
                          worse_channels)
 from ._frequency_kinds import frequency_kinds
@@ -72,7 +72,7 @@ def _unpredicted(ev, details) -> list:
     return out
 
 
-def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None, channel_floor=None, state=None):
+def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None, channel_floor=None, state=None, channel_rel=None):
     gap, fl, exc = gap_summary(ev, floor)
     _, _, exc0 = gap_summary(ev0, floor)
     shrink = 100.0 * (1 - exc / exc0) if exc0 > 0 else 0.0
@@ -84,7 +84,7 @@ def _entry(problem, c: Candidate, ev, ev0, floor, score, sig=None, channel_floor
              shrink_raw=float(100 * (1 - gap / g0)) if g0 > 0 else 0.0,
              per_dataset={k: v["nrmse"] for k, v in ev.items()},
              per_channel={k: dict(v["channels"]) for k, v in ev.items()},
-             worse_channels=worse_channels(ev, ev0, channel_floor))
+             worse_channels=worse_channels(ev, ev0, channel_floor, channel_rel))
     why = _implausible(problem, c, state)
     if why:
         e["implausible"] = why
@@ -114,6 +114,17 @@ def _implausible(problem, cand, state):
 
 def _channel_floors(details) -> dict:
     return {k: dict(v.get("channels", {})) for k, v in details.items()}
+
+
+def _factors(details, ev) -> tuple[dict, dict, int]:
+    """The margins of "beyond the floor" (:func:`._selection.significance_factor`) per set and per
+    torque channel, at one family-wise level over all the tests a diagnosis makes on the nominal
+    gap (every validation set pooled, and every torque channel), and that number of tests."""
+    tests = len(ev) + sum(len(v.get("channel_dof") or {}) for v in details.values())
+    factor = {k: significance_factor(v["dof"], tests) for k, v in details.items() if v.get("dof") is not None}
+    cfactor = {k: {c: significance_factor(d, tests) for c, d in (v.get("channel_dof") or {}).items()}
+               for k, v in details.items()}
+    return factor, cfactor, tests
 
 
 def _upper(details) -> dict:
@@ -148,6 +159,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     ev0 = pb.evaluate(nom)
     floor_source, floor_details = {}, {}
     floor = noise_floor(pb, ev0, case, floor_source, floor_details)
+    pb.count_noise(floor_details, ev0)
     cands = pb.candidates()
     sig = signatures(pb, nom, cands)
     held = indistinguishable_from_inertia(pb, cands)
@@ -196,17 +208,19 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     # (the floor is never bounded by a candidate's held-out gap: that would count the model error
     # the candidate does not hold as noise)
     cfloor, upper = _channel_floors(floor_details), _upper(floor_details)
+    factor, cfactor, tests = _factors(floor_details, ev0)
+    crel = {k: {c: gap_uncertainty(d) for c, d in (v.get("channel_dof") or {}).items()} for k, v in floor_details.items()}
     gap0, fl, exc0 = gap_summary(ev0, floor)
     for c in keep:
         st, ev = fitted[c]
         score = -ic_delta(ev, ev0, n_params(c, pb.user, bool(pb.ttrain), pb))
-        ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c), cfloor, st))
+        ranking.append(_entry(pb, c, ev, ev0, floor, score, sig.get(c), cfloor, st, crel))
         say(f"  {c.label(pb.names)}: gap {ranking[-1]['gap_after']:.2f} %, shrink {ranking[-1]['shrink']:.0f} %")
-    significant = is_significant(ev0, floor, upper) or decisive(ranking)
+    significant = is_significant(ev0, floor, upper, factor) or decisive(ranking)
     # a gap confined to a light joint (a wrist's: 1e-6 of the torque energy) never shows pooled:
     # the joint beyond its own floor is a gap of its own, which only an effect resolving that joint
     # on its own evidence may explain
-    joint_only = not significant and bool(joints_beyond_floor(ev0, cfloor))
+    joint_only = not significant and bool(joints_beyond_floor(ev0, cfloor, cfactor))
     order = rank_entries(ranking)
     ranking = [ranking[i] for i in order]
     keep = [keep[i] for i in order]
@@ -255,6 +269,7 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
                          simpler=lambda rich, simple: NESTED.get(rich.effect) == simple.effect and rich.joint == simple.joint,
                          first=fitted, on_select=on_select, significant=significant or joint_only, joint_only=joint_only,
                          channel_floor=cfloor, upper=upper, implausible=lambda c, st: _implausible(pb, c, st),
+                         factor=factor, channel_factor=cfactor, channel_rel=crel,
                          # an honest 'unexplained': a first effect closing less than MIN_NAMED_SHRINK % of
                          # the excess is not named (the least bad candidate is not a diagnosis), unless it
                          # supplies a measured mode the model lacked (a missing degree of freedom)
@@ -279,12 +294,13 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
 
         sel, swaps = swap_rivals(sel, ev0, floor, rivals, refit,
                                  n_params=lambda c: n_params(c, pb.user, bool(pb.ttrain), pb),
-                                 channel_floor=cfloor, implausible=lambda c, st: _implausible(pb, c, st), richer=richer)
+                                 channel_floor=cfloor, implausible=lambda c, st: _implausible(pb, c, st), richer=richer,
+                                 channel_rel=crel)
         for old_c, new_c, e0, e1 in swaps:
             say(f"{new_c.label(pb.names)} takes the place of {old_c.label(pb.names)}: excess {e0:.2f} -> {e1:.2f} %")
     selected = []
     for st in sel.steps:
-        selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score, None, cfloor, st.state))
+        selected.append(_entry(pb, st.cand, st.ev, ev0, floor, st.score, None, cfloor, st.state, crel))
         selected[-1]["step_shrink"] = st.step_shrink
     steps = [step_record(None, ev0, floor)] + [step_record(st.cand.label(pb.names), st.ev, floor) for st in sel.steps]
     state, ev_cur = sel.state, sel.ev
@@ -299,14 +315,15 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
     gap_after, _, exc_after = gap_summary(ev_cur, floor)
     shrink_total = float(np.clip(100 * (1 - exc_after / exc0), 0, 100)) if exc0 > 0 else 0.0
     floor_high = pooled_upper(floor, upper)
-    remaining = is_significant(ev_cur, floor, upper) or (joint_only and bool(joints_beyond_floor(ev_cur, cfloor)))
+    remaining = is_significant(ev_cur, floor, upper, factor) or (joint_only and bool(joints_beyond_floor(ev_cur, cfloor, cfactor)))
     significant = significant or joint_only
     verdict_ = verdict(significant, remaining, bool(sel.steps), shrink_total,
                        gap_after=gap_after, floor_upper=floor_high)
     reason = stop_reason(sel, pb.names)
     failed_floor = {k: v["reason"] for k, v in floor_details.items() if v.get("failed")}
     spread = _cad_spread(pb, nom) if verdict_ == "unexplained" else {}
-    if spread and not is_significant(ev0, {k: float(np.hypot(f, spread.get(k, 0.0))) for k, f in floor.items()}):
+    if spread and not is_significant(ev0, {k: float(np.hypot(f, spread.get(k, 0.0))) for k, f in floor.items()},
+                                     factor=factor):
         # nothing explains the gap, and the CAD tolerance alone spreads the model that far on data
         # that cannot identify the inertias: no alarm (a claim of an unmodelled effect would be unfounded)
         verdict_ = "within_noise"
@@ -349,7 +366,11 @@ def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int 
 
         processing={s_.name: s_.processing for s_ in pb.ttrain + pb.tval if s_.processing},
         significant=bool(significant), remaining_significant=bool(remaining),
-        joints_beyond_floor=[dict(dataset=k, channel=c) for k, c in joints_beyond_floor(ev0, cfloor)],
+        joints_beyond_floor=[dict(dataset=k, channel=c) for k, c in joints_beyond_floor(ev0, cfloor, cfactor)],
+        test=dict(family_alpha=FAMILY_ALPHA, tests=tests, min_gap=MIN_GAP, factor=factor, channel_factor=cfactor,
+                  rule="a gap lies beyond its floor when it exceeds factor x the floor + min_gap [%]: factor is the "
+                       "square root of the F(dof, dof) quantile at 1 - family_alpha / tests (dof: the noise's effective "
+                       f"samples), at least {SIGNIFICANCE:g}; one family-wise level over every set and joint tested"),
         where=wh[:40], ranking=ranking, selected=selected, ambiguous=ambiguous, steps=steps,
         swapped=[dict(replaced=a.label(pb.names), by=b.label(pb.names), excess_before=e0, excess_after=e1)
                  for a, b, e0, e1 in swaps],
@@ -426,7 +447,8 @@ def _choose_base(pb: Problem, case, nom, ev0, floor, floor_source, floor_details
         v = [e["nrmse"] ** 2 for e in ev.values() if e["kind"] in ("frf", "modal")]
         return float(np.sqrt(np.mean(v))) if v else np.inf
 
-    if not is_significant(ev_alt, floor_alt, _upper(det_alt)):
+    pb.count_noise(det_alt)
+    if not is_significant(ev_alt, floor_alt, _upper(det_alt), _factors(det_alt, ev_alt)[0]):
         li.update(used=True, reason="the refitted nominal model is within noise on the held-out data")
         return alt, ev_alt, floor_alt, src_alt, det_alt, {}
     fitted = first_round(nom)

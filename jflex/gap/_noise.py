@@ -79,8 +79,12 @@ def noise_floor(problem: Problem, ev: dict, case: Case, sources: dict | None = N
                 per = periodic_noise(s.t, s.q, s.tau, m)
                 if per is not None:
                     sig, dof, info = per
+                    prop = _repeating_processing_error(s, m, sig)
+                    sig = np.sqrt(sig**2 + prop**2)
+                    info["processing_nm"] = prop.tolist()
                     src[name] = (f"scatter between periods ({info['periods']} periods of {info['period_s']:.4g} s"
-                                 f"{', linear drift cancelled' if info['drift_cancelled'] else ''})")
+                                 f"{', linear drift cancelled' if info['drift_cancelled'] else ''}"
+                                 f"{', with the processing error' if np.any(prop > 0) else ''})")
                 else:
                     sig, dof, info = black_box_noise(s, r["resid"] * s.scale, m)
                     for k in ("base_only", "angle_series", "rigid_body", "history", "unpredicted"):
@@ -144,7 +148,8 @@ def _pooled(sig, dof, scale, m, names, info):
     floor = float(np.sqrt(var / en) * 100) if en > 0 else float("nan")
     parts = w * sig**2
     nu = float(var**2 / np.sum(np.where(m, parts**2 / np.maximum(dof, 1.0), 0.0))) if var > 0 else 0.0
-    info = dict(info, dof=nu, channels={names[j]: float(sig[j] / scale[j] * 100) for j in range(len(names)) if m[j]})
+    info = dict(info, dof=nu, channels={names[j]: float(sig[j] / scale[j] * 100) for j in range(len(names)) if m[j]},
+                channel_dof={names[j]: float(dof[j]) for j in range(len(names)) if m[j]})
     if nu >= 1 and np.isfinite(floor):
         a = 1 - CONFIDENCE
         info["low"] = float(floor * np.sqrt(nu / chi2.ppf(1 - a / 2, nu)))
@@ -212,6 +217,22 @@ def find_period(q) -> int | None:
             if rep(best) <= REPEAT_TOL:
                 return best
     return None
+
+
+def _repeating_processing_error(s, m, sig) -> np.ndarray:
+    """Per channel [N m], the error of filtering and differentiating a periodic record's angles
+    that repeats with the period (an encoder's quantisation of a motion that repeats exactly
+    repeats too): it cancels out of the scatter between periods but stays in the gap. The whole
+    processing error is predicted by propagating the angle noise through the processing and the
+    model (``propagated_angle_noise_nm`` of the set's processing); the part that does not repeat
+    shows as the scatter between periods of the model's own torque along the processed motion,
+    and is in the floor already."""
+    prop = np.asarray(s.processing.get("propagated_angle_noise_nm", np.zeros_like(sig)), float)
+    if not np.any(prop > 0):
+        return np.zeros_like(sig)
+    own = periodic_noise(s.t, s.q, _filtered(s, "F0") if hasattr(s, "cache") else s.F0, m)
+    spread = own[0] if own is not None else np.zeros_like(prop)
+    return np.sqrt(np.maximum(prop**2 - spread**2, 0.0))
 
 
 def periodic_noise(t, q, tau, m):

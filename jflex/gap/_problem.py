@@ -82,6 +82,9 @@ class Problem:
         self.n = self.robot.nq
         # responses whose channels hold every model joint enter as equation-error (torque) sets
         self.options = dict(DEFAULT_OPTIONS, **(getattr(case, "options", None) or {}))
+        # {set: effective samples of its noise}, once the noise floor has measured them
+        # (:meth:`count_noise`): the held-out criterion's sample count
+        self.noise_dof = {}
         proc = dict(cutoff_hz=self.options["filter_cutoff_hz"], decimate=int(self.options["decimate"]))
         self.ttrain = [T.torque_set(self.robot, d, **proc) for d in case.split("train") if _is_torque(d)]
         self.tval = [T.torque_set(self.robot, d, **proc) for d in case.split("validation") if _is_torque(d)]
@@ -453,6 +456,22 @@ class Problem:
         return R.simulation_model(self.robot, state.tfit, self.sim_springs(state), self._rotor())
 
     # --- evaluation ----------------------------------------------------------------------------
+    def count_noise(self, details: dict, ev: dict | None = None) -> None:
+        """The held-out criterion's sample counts from the noise floor's ``details``
+        (:func:`._noise.noise_floor`): per torque validation set the effective samples of its
+        noise summed over its channels (their own autocorrelation: coloured or quantised noise,
+        and the parallel low-pass, leave far fewer independent samples than rows), at most one in
+        NEFF_SPACING rows as before; ``ev`` (an evaluation made before) is updated in place."""
+        for s in self.tval:
+            d = details.get(s.name) or {}
+            dof = d.get("channel_dof")
+            if not dof:
+                continue
+            rows = np.sum(self.included(s.name)) * len(s.t) / NEFF_SPACING
+            self.noise_dof[s.name] = float(min(rows, sum(dof.values())))
+            if ev is not None and s.name in ev:
+                ev[s.name]["neff"] = self.noise_dof[s.name]
+
     def evaluate(self, state: State, sets="validation", frequency_only: bool = False) -> dict:
         """Per data set: nrmse [%], per channel [%], mse and effective sample count
         (``frequency_only``: the FRF and modal sets alone)."""
@@ -477,7 +496,7 @@ class Problem:
             out[s.name] = dict(kind="torque", nrmse=g,
                                channels={self.names[j]: float(ch[j]) for j in range(self.n) if m[j]},
                                weights={self.names[j]: float(w[j]) for j in range(self.n) if m[j]},
-                               neff=e[:, m].size / 10.0, resid=e)
+                               neff=self.noise_dof.get(s.name, e[:, m].size / NEFF_SPACING), resid=e)
         for d in fsets:
             a = d.arrays
             if d.kind == "frf":
@@ -505,6 +524,9 @@ class Problem:
                 out[d.name] = dict(kind="modal", nrmse=float(tot), channels=ch, neff=float(len(ef)), ef=ef, ez=ez,
                                    idx=idx, f_model=f, z_model=z)
         return out
+
+
+NEFF_SPACING = 10.0  # rows per effective sample of a torque set when its noise is not measured
 
 
 def pooled_gap(e, scale, m, weight=None) -> tuple[float, np.ndarray, np.ndarray]:

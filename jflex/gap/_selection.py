@@ -20,6 +20,35 @@ EXPLAINED_SHRINK = 80.0  # [%] of the nominal excess closed in all for the verdi
 EXPLAINED_FLOOR_FACTOR = 2.0
 
 
+# family-wise false-alarm rate of "beyond the floor": the per-joint and per-set tests of a
+# diagnosis are corrected together (Bonferroni over all of them), so that a 7-joint arm with two
+# validation sets is not 16 chances at a false alarm
+FAMILY_ALPHA = 0.05
+DOF_SHARE = 0.5  # of a measured effective-sample count the test relies on (see significance_factor)
+
+
+def significance_factor(dof, tests: int = 1, alpha: float = FAMILY_ALPHA) -> float:
+    """The factor on a noise floor that a gap must exceed, besides ``MIN_GAP``, to lie beyond it at
+    family-wise false-alarm rate ``alpha`` over ``tests`` tests: the gap's and the floor's mean
+    squares each estimate the noise variance from ``dof`` effective samples (the noise's own
+    autocorrelation: coloured or quantised samples are not independent), so with no model error
+    their ratio follows ``F(dof, dof)``; the factor is the square root of its ``1 - alpha / tests``
+    quantile, and at least ``SIGNIFICANCE`` (a floor estimate is biased, not only scattered).
+    ``dof`` is itself estimated from one record (:func:`._noise.effective_samples`), which scatters
+    by ~30 % on strongly coloured noise; an overestimate loosens the test (at an AR(1) pole of
+    0.97 with 7 joints: 12 % false alarms instead of 5 %), so the quantile is taken at DOF_SHARE of
+    it (Monte Carlo over AR(1) poles 0.5-0.99: 0.3-4.9 %).
+    Without a usable ``dof`` (< 1) nothing can be judged: ``inf``."""
+    from scipy.stats import f as fdist
+
+    dof = float(dof) if dof is not None else 0.0
+    if not np.isfinite(dof) or dof < 1.0:
+        return float("inf")
+    d = max(DOF_SHARE * dof, 1.0)
+    q = float(fdist.ppf(1.0 - alpha / max(int(tests), 1), d, d))
+    return max(SIGNIFICANCE, float(np.sqrt(q)))
+
+
 def gap_summary(ev, floor):
     names = list(ev)
     g = np.array([ev[k]["nrmse"] for k in names])
@@ -30,29 +59,46 @@ def gap_summary(ev, floor):
     return gap, fl, exc
 
 
-def is_significant(ev, floor, upper=None):
+def is_significant(ev, floor, upper=None, factor=None):
     """Whether some validation set's gap exceeds its noise floor beyond the margin: ``SIGNIFICANCE``
-    x the floor, or the upper end of the floor's own confidence interval (``upper``, ``{set: %}``,
-    when the estimate is uncertain: few periods or effective samples) if that is larger, plus
-    ``MIN_GAP``."""
-    up = upper or {}
-    return any(ev[k]["nrmse"] > max(SIGNIFICANCE * floor[k], up.get(k) or 0.0) + MIN_GAP for k in ev)
+    x the floor (``factor[set]`` instead when given: :func:`significance_factor`, the margin its
+    effective samples and the number of tests call for), or the upper end of the floor's own
+    confidence interval (``upper``, ``{set: %}``, when the estimate is uncertain: few periods or
+    effective samples) if that is larger, plus ``MIN_GAP``."""
+    up, fa = upper or {}, factor or {}
+    return any(ev[k]["nrmse"] > max(fa.get(k, SIGNIFICANCE) * floor[k], up.get(k) or 0.0) + MIN_GAP for k in ev)
 
 
 WORSE_MIN = 0.1  # [%] a channel's change below this is never "worse", whatever its floor
+WORSE_Z = 3.0  # standard errors of a joint's own gap by which a named effect may make it worse
 
 
-def worse_channels(ev_new, ev_old, channel_floor=None) -> list:
+def gap_uncertainty(dof) -> float:
+    """Relative standard error of an NRMSE estimated from ``dof`` effective samples of its noise
+    (``sd(g) / g = 1 / sqrt(2 dof)``), times WORSE_Z: the share of a joint's gap by which a model
+    may change it before the change is beyond what the data can tell."""
+    dof = float(dof) if dof is not None else 0.0
+    return float(WORSE_Z / np.sqrt(2.0 * dof)) if np.isfinite(dof) and dof >= 1.0 else float("inf")
+
+
+def worse_channels(ev_new, ev_old, channel_floor=None, channel_rel=None) -> list:
     """The torque channels (joints) that a model evaluated as ``ev_new`` predicts worse than the
-    model before it (``ev_old``) by more than their own noise: ``after > before + floor`` with
-    ``floor`` the channel's noise floor [%] (``channel_floor[set][channel]``, else the set's,
-    at least WORSE_MIN). An effect that helps the gap pooled over the joints but makes a joint
-    worse beyond its noise stands in for something else there: it is not accepted.
-    Returns ``[dict(dataset, channel, before, after, floor)]``."""
+    model before it (``ev_old``) by more than their own noise: ``after > before + allowed`` with
+    ``allowed`` the channel's noise floor [%] (``channel_floor[set][channel]``, else the set's),
+    or, when ``channel_rel[set][channel]`` is given (:func:`gap_uncertainty`), the uncertainty of
+    the joint's own gap, ``before x channel_rel``, where that is smaller (a joint made 1.9 x worse
+    by a fit is not saved by a floor as large as its gap); at least WORSE_MIN. An effect that helps
+    the gap pooled over the joints but makes a joint worse beyond its noise stands in for
+    something else there: it is not accepted.
+    Returns ``[dict(dataset, channel, before, after, floor)]`` (``floor``: the change allowed)."""
     out = []
-    cf = channel_floor or {}
+    cf, cr = channel_floor or {}, channel_rel or {}
     for k, ch, before, after in _channel_changes(ev_new, ev_old):
-        fl = max(float(cf.get(k, {}).get(ch, 0.0)), WORSE_MIN)
+        fl = float(cf.get(k, {}).get(ch, 0.0))
+        rel = cr.get(k, {}).get(ch)
+        if rel is not None and np.isfinite(rel):
+            fl = min(fl, before * rel) if fl > 0 else before * rel
+        fl = max(fl, WORSE_MIN)
         if after > before + fl:
             out.append(dict(dataset=k, channel=ch, before=before, after=after, floor=fl))
     return out
@@ -69,18 +115,19 @@ def _channel_changes(ev_new, ev_old):
                 yield k, ch, float(before), float(after)
 
 
-def resolved_channels(ev_new, ev_old, channel_floor=None) -> list:
+def resolved_channels(ev_new, ev_old, channel_floor=None, channel_factor=None) -> list:
     """The torque channels (joints) that a model evaluated as ``ev_new`` brings from beyond their
     own noise (``before > SIGNIFICANCE x floor + MIN_GAP``) to within it (``after <= floor``), with
     ``floor`` the channel's floor [%] (``channel_floor[set][channel]``). A gap confined to one
     joint carries little of the pooled torque energy (a wrist joint of an industrial arm: 0.3 %),
-    so the pooled shrink alone can leave it unnamed. Returns ``[dict(dataset, channel, before,
-    after, floor)]``."""
+    so the pooled shrink alone can leave it unnamed. ``channel_factor``: ``{set: {channel: x}}``,
+    the margin of "beyond" per channel (:func:`significance_factor`; default ``SIGNIFICANCE``).
+    Returns ``[dict(dataset, channel, before, after, floor)]``."""
     out = []
-    cf = channel_floor or {}
+    cf, fa = channel_floor or {}, channel_factor or {}
     for k, ch, before, after in _channel_changes(ev_new, ev_old):
         fl = cf.get(k, {}).get(ch)
-        if _beyond(before, fl) and after <= fl:
+        if _beyond(before, fl, fa.get(k, {}).get(ch, SIGNIFICANCE)) and after <= fl:
             out.append(dict(dataset=k, channel=ch, before=before, after=after, floor=float(fl)))
     return out
 
@@ -108,7 +155,7 @@ def vetoed(entry) -> str | None:
         return f"implausible fit: {entry['implausible']}"
     w = entry.get("worse_channels")
     if w:
-        return "makes " + ", ".join(f"{x['channel']} worse ({x['before']:.2f} -> {x['after']:.2f} %, floor "
+        return "makes " + ", ".join(f"{x['channel']} worse ({x['before']:.2f} -> {x['after']:.2f} %, allowed "
                                     f"{x['floor']:.2f} %)" for x in w)
     return None
 
@@ -211,7 +258,9 @@ class Selection:
 def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_params, max_effects: int,
                    simpler=None, first=None, on_select=None, min_first_shrink=0.0,
                    significant: bool | None = None, refine=None, channel_floor: dict | None = None,
-                   upper: dict | None = None, implausible=None, joint_only: bool = False) -> Selection:
+                   upper: dict | None = None, implausible=None, joint_only: bool = False,
+                   factor: dict | None = None, channel_factor: dict | None = None,
+                   channel_rel: dict | None = None) -> Selection:
     """Forward selection on held-out data, the rules of :func:`diagnose`: each round refits every
     candidate not yet added on top of the current model, takes the one closing the most of the
     current excess gap (rounded to a point, so that noise-level differences tie; the information
@@ -242,9 +291,11 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
     - ``refine(step) -> (state, ev)``: optional; the taken step's model refined (e.g. a costly
       identification done only for what was selected) before the next round builds on it.
     - ``channel_floor``: ``{set: {channel: floor %}}``; a candidate that makes some joint worse by
-      more than that joint's floor (:func:`worse_channels`) is never taken.
-    - ``upper``: ``{set: %}``, the upper ends of the floors' confidence intervals
-      (:func:`is_significant`).
+      more than that joint's floor, or than its own gap's uncertainty (``channel_rel``,
+      :func:`gap_uncertainty`) where smaller (:func:`worse_channels`), is never taken.
+    - ``upper``: ``{set: %}``, the upper ends of the floors' confidence intervals; ``factor``:
+      ``{set: x}`` and ``channel_factor``: ``{set: {channel: x}}``, the margins of "beyond the
+      floor" (:func:`is_significant`, :func:`joints_beyond_floor`, :func:`significance_factor`).
     - ``implausible(cand, state) -> str | None``: optional; a candidate whose fit it calls
       implausible is never taken.
     Candidates passed over for either reason are listed in ``Selection.vetoed``.
@@ -261,7 +312,7 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
     ``min_first_shrink`` / ``MIN_STEP_SHRINK`` of the pooled excess, or the pooled gap is already
     within noise (a coupled wrist drive seen on the wrist joints alone).
     """
-    sig_ = lambda ev: is_significant(ev, floor, upper)
+    sig_ = lambda ev: is_significant(ev, floor, upper, factor)
     vetoes = []
     if not (sig_(ev0) if significant is None else significant):
         return _with(vetoes, Selection([], state0, ev0, "not significant"))
@@ -292,7 +343,8 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
                 continue
             st, ev = first[c] if (first is not None and not steps and c in first) else refit(state, c)
             why = implausible(c, st) if implausible is not None else None
-            why = f"implausible fit: {why}" if why else vetoed(dict(worse_channels=worse_channels(ev, ev_cur, channel_floor)))
+            why = f"implausible fit: {why}" if why else vetoed(dict(worse_channels=worse_channels(ev, ev_cur, channel_floor,
+                                                                                                channel_rel)))
             if why:
                 vetoes.append((len(steps), c, why))
                 continue
@@ -309,7 +361,7 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
                 best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink), state))
             # (one that makes the pooled gap worse by a step's share stands in for something else:
             # an offset at a Panda's joint 2 "resolved" joint 3 while the pooled excess grew 52 %)
-            if resolved_channels(ev, ev_cur, channel_floor) and step_shrink > -MIN_STEP_SHRINK:
+            if resolved_channels(ev, ev_cur, channel_floor, channel_factor) and step_shrink > -MIN_STEP_SHRINK:
                 jscore = max(score, channel_score(ev, ev_cur, n_params(c)))
                 if jscore >= DECISIVE_SCORE and (local is None or jscore > local[0]):
                     local = (jscore, Step(c, st, ev, ev_cur, float(score), float(step_shrink), state))
@@ -354,7 +406,7 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
             weak, new = None, steps
         for st_ in new if on_select is not None else ():
             on_select(st_)
-        if not sig_(ev_cur) and not joints_beyond_floor(ev_cur, channel_floor):
+        if not sig_(ev_cur) and not joints_beyond_floor(ev_cur, channel_floor, channel_factor):
             return _with(vetoes, Selection(steps, state, ev_cur, "within noise"))
 
 
@@ -362,7 +414,7 @@ SWAP_SHRINK = 5.0  # [%] alone, an effect at the same place within this of a sel
 
 
 def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_params, channel_floor=None,
-                implausible=None, richer=None) -> tuple[Selection, list]:
+                implausible=None, richer=None, channel_rel=None) -> tuple[Selection, list]:
     """Each selected effect is tried against its rivals (``rivals(cand) -> list``: effects at the
     same place that alone closed nearly as much) inside the final model: the model is rebuilt from
     the nominal one with the rival in the effect's place and the other effects as selected, and
@@ -399,7 +451,7 @@ def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_para
                 _, _, e_new = gap_summary(ev, floor)
                 chain.append(Step(c, state, ev, prev_ev, float(-ic_delta(ev, prev_ev, n_params(c))),
                                   float(100 * (1 - e_new / e_prev)) if e_prev > 0 else 0.0, prev_state))
-            if not ok or worse_channels(ev, sel.ev, channel_floor):
+            if not ok or worse_channels(ev, sel.ev, channel_floor, channel_rel):
                 continue
             _, _, exc = gap_summary(ev, floor)
             if alt in nested:
@@ -414,20 +466,20 @@ def swap_rivals(sel: Selection, ev0: dict, floor: dict, rivals, refit, *, n_para
     return sel, swaps
 
 
-def _beyond(gap, floor) -> bool:
-    """Whether a channel's gap [%] lies beyond its own floor [%] (``SIGNIFICANCE`` x it + ``MIN_GAP``;
+def _beyond(gap, floor, factor=SIGNIFICANCE) -> bool:
+    """Whether a channel's gap [%] lies beyond its own floor [%] (``factor`` x it + ``MIN_GAP``;
     a channel without a floor never does)."""
-    return floor is not None and floor > 0 and gap > SIGNIFICANCE * floor + MIN_GAP
+    return floor is not None and floor > 0 and gap > factor * floor + MIN_GAP
 
 
-def joints_beyond_floor(ev, channel_floor) -> list:
+def joints_beyond_floor(ev, channel_floor, channel_factor=None) -> list:
     """``(set, channel)`` of every torque channel whose gap lies beyond its own floor
-    (``channel_floor[set][channel]`` [%], :func:`_beyond`). While one does, the pooled gap within
-    noise does not end the search (only a candidate that resolves such a joint can still be taken,
-    :func:`resolved_channels`)."""
-    cf = channel_floor or {}
+    (``channel_floor[set][channel]`` [%], :func:`_beyond`, with the margin ``channel_factor[set][channel]``,
+    default ``SIGNIFICANCE``). While one does, the pooled gap within noise does not end the search
+    (only a candidate that resolves such a joint can still be taken, :func:`resolved_channels`)."""
+    cf, fa = channel_floor or {}, channel_factor or {}
     return [(k, ch) for k, r in ev.items() if r.get("kind") == "torque"
-            for ch, v in r["channels"].items() if _beyond(v, cf.get(k, {}).get(ch))]
+            for ch, v in r["channels"].items() if _beyond(v, cf.get(k, {}).get(ch), fa.get(k, {}).get(ch, SIGNIFICANCE))]
 
 
 def _with(vetoes, sel: Selection) -> Selection:

@@ -439,13 +439,45 @@ def fit_terms(terms, delay, sets, inertia=None) -> TorqueFit:
         l, h = inertia.bounds()
         lo, hi = [l] + lo, [h] + hi
         Gp[np.arange(P), np.arange(P)] += inertia.penalty()
-    x = _bounded_normal_solve(Gp, b, np.concatenate(lo), np.concatenate(hi))
+    lo, hi = np.concatenate(lo), np.concatenate(hi)
+    x = _consistent(terms, _bounded_normal_solve(Gp, b, lo, hi), Gp, b, lo, hi, P)
     cost = float(yy - 2 * x @ b + x @ G @ x)
     cov = None
     if P:
         sig2 = max(cost, 0.0) / max(rows - p, 1)
         cov = sig2 * np.linalg.pinv(Gp, rcond=1e-13, hermitian=True)[:P, :P]
     return TorqueFit(terms, delay, x[P:], max(cost, 0.0), x[:P] if P else None, inertia, cov)
+
+
+def _consistent(terms, x, G, b, lo, hi, P):
+    """``x`` with the coefficients of each term that has a ``consistent(theta, metric)`` method (a
+    payload: a rigid body's inertial parameters) moved into the set it allows, in the metric ``S``
+    of the fit's own cost (the Schur complement of the other coefficients), and the other
+    coefficients refitted around them within their bounds: a constrained fit, not a veto after it."""
+    off = P
+    for t in terms:
+        if not t.n_params:
+            continue
+        sl = np.arange(off, off + t.n_params)
+        off += t.n_params
+        project = getattr(t, "consistent", None)
+        if project is None:
+            continue
+        o = np.setdiff1d(np.arange(x.size), sl)
+        Goo = G[np.ix_(o, o)]
+
+        def metric(sl=sl, o=o, Goo=Goo):
+            S = G[np.ix_(sl, sl)] - G[np.ix_(sl, o)] @ np.linalg.pinv(Goo, rcond=1e-13, hermitian=True) @ G[np.ix_(o, sl)]
+            return 0.5 * (S + S.T)
+
+        new = project(x[sl], metric)  # None: already in the set (the metric is then never formed)
+        if new is None:
+            continue
+        x = x.copy()
+        x[sl] = new
+        if o.size:
+            x[o] = _bounded_normal_solve(Goo, b[o] - G[np.ix_(o, sl)] @ new, lo[o], hi[o])
+    return x
 
 
 def predict(fit: TorqueFit, s: TorqueSet) -> np.ndarray:

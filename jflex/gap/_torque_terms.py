@@ -70,6 +70,73 @@ def out_of_range(name: str, value: float, lo: float, hi: float, unit: str = "", 
     return f"{name} = {value:.4g}{u} lies outside the plausible range [{lo:.4g}, {hi:.4g}]{u}" + (f" ({why})" if why else "")
 
 
+PSEUDO_INERTIA_TOL = 1e-6  # relative to its largest eigenvalue: rounding, not a body's inertia
+
+
+def payload_implausible(theta) -> str | None:
+    """Why payload parameters ``[m, m cx, m cy, m cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (inertia about
+    the last body's origin) are no rigid body's, else None: a body has a positive mass and a
+    positive semi-definite pseudo-inertia ``[[tr(I)/2 1 - I, m c], [m c^T, m]]`` (its second moments
+    of mass; Wensing, Kim and Slotine, "Linear matrix inequalities for physically consistent
+    inertial parameter identification"), which also holds the triangle inequalities of the
+    principal moments. A fit outside that set absorbs something else."""
+    p = np.asarray(theta, float)
+    m, h = float(p[0]), p[1:4]
+    if not m > 0:
+        return (f"a payload of mass {m:.4g} kg with first moment {np.round(h, 4).tolist()} kg m is no rigid body "
+                "(a body carried has a positive mass)")
+    J = _pseudo_inertia(p)
+    I = np.trace(J[:3, :3]) * np.eye(3) - J[:3, :3]
+    lam = np.linalg.eigvalsh(J)
+    if lam[0] < -PSEUDO_INERTIA_TOL * max(abs(lam[-1]), 1e-300):
+        return (f"a payload of {m:.4g} kg whose inertia [Ixx, Iyy, Izz] = {np.round(np.diag(I), 5).tolist()} kg m^2 about "
+                f"the tool body's origin and first moment {np.round(h, 4).tolist()} kg m no rigid body has (its pseudo-"
+                f"inertia matrix has the negative eigenvalue {lam[0]:.3g})")
+    return None
+
+
+def _pseudo_inertia(p) -> np.ndarray:
+    """The 4 x 4 pseudo-inertia ``[[tr(I)/2 1 - I, m c], [m c^T, m]]`` of inertial parameters ``p``
+    (Pinocchio's order, inertia about the body's origin)."""
+    I = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
+    J = np.zeros((4, 4))
+    J[:3, :3] = 0.5 * np.trace(I) * np.eye(3) - I
+    J[:3, 3] = J[3, :3] = p[1:4]
+    J[3, 3] = p[0]
+    return J
+
+
+def _from_pseudo_inertia(J) -> np.ndarray:
+    S = J[:3, :3]
+    I = np.trace(S) * np.eye(3) - S
+    return np.array([J[3, 3], *J[:3, 3], I[0, 0], I[0, 1], I[1, 1], I[0, 2], I[1, 2], I[2, 2]])
+
+
+def nearest_rigid_body(theta, S) -> np.ndarray:
+    """The inertial parameters of a rigid body (positive semi-definite pseudo-inertia) nearest to
+    ``theta`` in the metric ``S`` (10 x 10): ``min (p - theta)' S (p - theta)`` over ``p`` whose
+    pseudo-inertia is ``L L'`` (``L`` lower triangular: every such ``p`` is some body's, and only
+    those; Rucker and Wensing, "Smooth parameterization of rigid-body inertia"), started from the
+    pseudo-inertia with its negative eigenvalues cut."""
+    import scipy.optimize as so
+
+    theta = np.asarray(theta, float)
+    w, V = np.linalg.eigh(S)
+    C = (V * np.sqrt(np.maximum(w, 1e-12 * max(float(w.max()), 1e-300)))).T  # C'C ~ S
+    lam, U = np.linalg.eigh(_pseudo_inertia(theta))
+    J0 = (U * np.maximum(lam, 1e-9 * max(float(lam.max()), 1e-12))) @ U.T
+    L0 = np.linalg.cholesky(J0 + 1e-12 * np.eye(4))
+    tri = np.tril_indices(4)
+
+    def params(v):
+        L = np.zeros((4, 4))
+        L[tri] = v
+        return _from_pseudo_inertia(L @ L.T)
+
+    r = so.least_squares(lambda v: C @ (params(v) - theta), L0[tri], method="lm", xtol=1e-12, ftol=1e-12)
+    return params(r.x)
+
+
 def torque_share_implausible(term, theta, sets) -> str | None:
     """The generic range of a term's coefficients: the torque it accounts for at each joint (rms)
     at most ``TORQUE_FRACTION`` x the measured torque's rms there (an effect that needs more torque
@@ -147,9 +214,21 @@ class LawTerm(TorqueTerm):
             out[self.meta.hyper[2]] = float(self.hyper)
         return out
 
+    def consistent(self, theta, metric):
+        """A payload's parameters moved to the nearest rigid body's in the fit's metric
+        (``metric()``: the cost's matrix in them, :func:`._torque._consistent`), None when they are
+        one already; other laws have no such set (their bounds hold them)."""
+        if self.effect != "payload" or payload_implausible(theta) is None:
+            return None
+        return nearest_rigid_body(theta, metric())
+
     def implausible(self, theta, sets):
         if not sets:
             return None
+        if self.effect == "payload":
+            why = payload_implausible(theta)
+            if why:
+                return why
         ranges = None if self.joint is None else _law_ranges(self.effect, self.joint, data_scale(sets))
         if ranges is None:
             return torque_share_implausible(self, theta, sets)
