@@ -21,9 +21,10 @@ SLOW = os.environ.get("JFLEX_SLOW", "0") == "1"
 def pytest_collection_modifyitems(config, items):
     import pytest
 
-    # the quick experiments (minutes in all) run in CI's step of their own, not in the suite
+    # the installed wheel and the experiments' quick runs (minutes in all) run in CI's step of
+    # their own (.ci/run), not in the suite
     if "experiments" not in (config.getoption("markexpr") or ""):
-        skip = pytest.mark.skip(reason="the experiments' quick runs: select them with -m experiments")
+        skip = pytest.mark.skip(reason="installed wheel and quick experiments: select them with -m experiments")
         for item in items:
             if "experiments" in item.keywords:
                 item.add_marker(skip)

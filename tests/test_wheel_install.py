@@ -7,7 +7,11 @@ installed with ``--no-deps --no-index`` into a fresh venv that sees this interpr
 for jflex's dependencies (:func:`_venv_seeing_these_packages`: also when pytest itself runs in a
 venv, whose packages ``--system-site-packages`` would not show). Every command runs with its working
 directory in a temporary folder, and the test checks that the venv's ``jflex`` is the installed
-one, not this checkout's."""
+one, not this checkout's.
+
+The tests that need the installed wheel are marked ``experiments``: CI runs them (with every
+experiment's ``--quick`` run) in its step after the suite, ``pytest -m experiments``, which
+builds the wheel once for them all; a plain ``pytest`` skips them."""
 
 from __future__ import annotations
 
@@ -103,6 +107,7 @@ def test_pyproject_lists_every_jflex_package():
     assert set(find_packages(str(ROOT), include=["jflex*"])) | {"jflex.configs", "jflex.experiments"} == listed
 
 
+@pytest.mark.experiments
 def test_installed_jflex_is_not_the_checkout(venv):
     py, _, work = venv
     # one process: where jflex and its shipped folders are, then `run --list` with those folders
@@ -120,6 +125,7 @@ def test_installed_jflex_is_not_the_checkout(venv):
     assert res.returncode == 2 and "no experiment scripts found" in res.stderr, (res.returncode, res.stderr)
 
 
+@pytest.mark.experiments
 def test_run_list_info_and_load_robot_installed(venv):
     py, jflex, work = venv
     listing = _run([str(jflex), "run", "--list"], cwd=work).stdout
@@ -147,6 +153,7 @@ atol: 1.0e-9
 """
 
 
+@pytest.mark.experiments
 def test_quick_experiment_installed(venv, tmp_path):
     # the vibration experiment on a tiny config (its default one takes half a minute)
     _, jflex, work = venv
