@@ -24,7 +24,7 @@ def pytest_collection_modifyitems(config, items):
     # the installed wheel and the experiments' quick runs (minutes in all) run in CI's step of
     # their own (.ci/run), not in the suite
     if "experiments" not in (config.getoption("markexpr") or ""):
-        skip = pytest.mark.skip(reason="installed wheel and quick experiments: select them with -m experiments")
+        skip = pytest.mark.skip(reason="an end-to-end run (an experiment, or jflex installed from a wheel): select it with -m experiments")
         for item in items:
             if "experiments" in item.keywords:
                 item.add_marker(skip)

@@ -65,6 +65,7 @@ def kr90_run(tmp_path_factory):
     return _run(tmp_path_factory.mktemp("kr90"), diagnose=True, max_steps=30)
 
 
+@pytest.mark.experiments  # a run of the experiment (1-2 min): CI's step after the suite
 def test_prediction_kc_refit_pairs_rows_by_shape(kr90_run):
     """K, C fitted on configuration 1 of the KR90: the fitted rows reproduce Table 4.6's Exp.
     values (6 parameters, 6 numbers), the rows of configurations 2-3 are paired one-to-one with
@@ -91,6 +92,7 @@ def test_prediction_kc_refit_pairs_rows_by_shape(kr90_run):
     assert "Table 4.6, configuration 2, row 1" in row["source"]
 
 
+@pytest.mark.experiments  # a run of the experiment (1-2 min): CI's step after the suite
 def test_prediction_diagnosed_effect_beats_kc_refit(kr90_run):
     """KR90 fitted on configuration 1 (its fourth EMA mode, 19.2 Hz, included): the diagnosis,
     which sees configuration 1 only, adds an orthogonal compliance, and the model with it predicts
