@@ -18,31 +18,73 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 # experiment: (schema class, configs it reads, a field that must be > 0, a plain numeric field)
 EXPERIMENTS = {
-    "seed000_vibration": ("Seed000VibrationConfig", ["seed000_vibration.yaml"],
+    "seed000_vibration": ("Seed000VibrationConfig", ["seed000_vibration.yaml", "seed000_vibration_quick.yaml"],
                           ("stiffness_N_per_m",), ("forced", "force_N")),
-    "seed004_damping": ("Seed004DampingConfig", ["seed004_rigid_flexible_arm.yaml"],
+    "seed004_damping": ("Seed004DampingConfig", ["seed004_rigid_flexible_arm.yaml", "seed004_rigid_flexible_arm_quick.yaml"],
                         ("arm", "EI3_N_m2"), ("initial_tip_deflection_m",)),
-    "seed001_rp_arm": ("Seed001RpArmConfig", ["seed001_rp_arm_quick.yaml", "seed001_rp_arm.yaml"],
+    "seed001_rp_arm": ("Seed001RpArmConfig", ["seed001_rp_arm_quick.yaml", "seed001_rp_arm.yaml",
+                                           "seed001_rp_arm_one_variant.yaml"],
                        ("joint", "stiffness_N_m_per_rad"), ("loading", "revolute_torque_N_m")),
-    "gap_seed001": ("GapSeed001Config", ["gap_seed001.yaml", "gap_seed001_full.yaml"],
+    "gap_seed001": ("GapSeed001Config", ["gap_seed001.yaml", "gap_seed001_full.yaml", "gap_seed001_quick.yaml"],
                     ("start", "joint_stiffness_N_m_per_rad"), ("noise", "q1_deg")),
-    "gap_seed002": ("GapSeed002Config", ["gap_seed002.yaml"], ("gap", "noise", "sigma_mm"), ("gap", "zeta")),
-    "identify_seed004": ("IdentifySeed004Config", ["identify_seed004.yaml"], ("static", "planted", "EI3_N_m2"),
+    "gap_seed002": ("GapSeed002Config", ["gap_seed002.yaml", "gap_seed002_quick.yaml"], ("gap", "noise", "sigma_mm"), ("gap", "zeta")),
+    "identify_seed004": ("IdentifySeed004Config", ["identify_seed004.yaml", "identify_seed004_quick.yaml"], ("static", "planted", "EI3_N_m2"),
                          ("static", "loads_N", 1)),
-    "identify_synthetic": ("IdentifySyntheticConfig", ["identify_synthetic.yaml"],
+    "identify_synthetic": ("IdentifySyntheticConfig", ["identify_synthetic.yaml", "identify_synthetic_quick.yaml"],
                            ("flexible_joints", "stiffness_N_m_per_rad", 1), ("rigid_friction", "compensator_N_m", 0)),
     # not an experiment script: `jflex demo` (jflex/cli.py) reads configs/demo.yaml
     "demo": ("DemoConfig", ["demo.yaml"], None, ("grid", "q2_deg", 0)),
-    "press_bdc": ("PressBdcConfig", ["press.yaml"], ("press", "main_mass"), ("press", "crank_pivot", 0)),
+    "press_bdc": ("PressBdcConfig", ["press.yaml", "press_quick.yaml"], ("press", "main_mass"), ("press", "crank_pivot", 0)),
     # these three use `from __future__ import annotations`: their schemas resolve only when the
     # script is registered in sys.modules before it runs, as jflex.cli.load_experiment does
-    "posture_modal": ("PostureModalConfig", ["posture_modal.yaml"], ("frf", "f_min_Hz"), ("lobes", "spindle_rpm", 1)),
-    "identify_seed003": ("IdentifySeed003Config", ["identify_seed003.yaml"], ("start_factor",), ("weights", "frequency")),
-    "seed003_prediction": ("PredictionConfig", ["seed003_prediction.yaml"], ("robots", 1, "wrist", "mass_kg"),
+    "posture_modal": ("PostureModalConfig", ["posture_modal.yaml", "posture_modal_quick.yaml"], ("frf", "f_min_Hz"), ("lobes", "spindle_rpm", 1)),
+    "identify_seed003": ("IdentifySeed003Config", ["identify_seed003.yaml", "identify_seed003_quick.yaml"], ("start_factor",), ("weights", "frequency")),
+    "seed003_prediction": ("PredictionConfig", ["seed003_prediction.yaml", "seed003_prediction_quick.yaml"], ("robots", 1, "wrist", "mass_kg"),
                            ("weights", "damping")),
 }
 # experiments that take no YAML config (only --out)
 NO_CONFIG = {"gap_seed003"}
+
+
+def test_every_experiment_has_a_quick_mode_whose_config_ships():
+    # `jflex run NAME --quick` (CI runs each from the installed wheel): a config under configs/
+    # and a check of the key figures; gap_seed003 takes no config, only the flag
+    import re
+
+    from jflex.cli import experiments
+
+    for name, path in experiments().items():
+        if path.parent != ROOT / "experiments":
+            continue
+        text = path.read_text()
+        if name in NO_CONFIG:
+            assert '"--quick"' in text and "quick_check(" in text, name
+            continue
+        m = re.search(r'quick=\((?:[\w.]+ / )*(?:DEFAULT\.with_name\()?"(\w+\.yaml)"', text)
+        assert m and (ROOT / "configs" / m.group(1)).is_file() and "def quick_figures(" in text, name
+        assert any(m.group(1) in cfgs for _, cfgs, _, _ in [EXPERIMENTS[name]]), (name, m.group(1))
+
+
+def test_quick_check_refuses_a_figure_outside_its_bounds_or_not_finite(tmp_path, capsys):
+    from jflex._runs import quick_check
+
+    rows = quick_check("x", {"a [Hz]": (10.2, 9.9, 10.5)})
+    assert rows == {"a [Hz]": {"value": 10.2, "low": 9.9, "high": 10.5, "ok": True}}
+    for value in (10.6, math.nan):
+        with pytest.raises(jflex.JFlexError, match=r"x --quick: b \[Hz\] = .* not in \[9\.9, 10\.5\]"):
+            quick_check("x", {"a [Hz]": (10.2, 9.9, 10.5), "b [Hz]": (value, 9.9, 10.5)})
+    assert "OUT OF" in capsys.readouterr().out
+    # through experiment_cli: --quick takes the quick config, checks, and the results keep the rows
+    (tmp_path / "full.yaml").write_text("n: 1\n")
+    (tmp_path / "small.yaml").write_text("n: 2\n")
+    run = lambda cfg, d: {"n": cfg["n"]}
+    check = lambda res: {"n": (res["n"], 2, 2)}
+    out = jflex.experiment_cli("x", tmp_path / "full.yaml", run, ["--quick", "--out", str(tmp_path / "q")],
+                               quick=(tmp_path / "small.yaml", check))
+    assert __import__("json").loads((out / "results.json").read_text())["quick_check"]["n"]["ok"] is True
+    with pytest.raises(jflex.JFlexError, match="x --quick: n = 1 not in"):
+        jflex.experiment_cli("x", tmp_path / "full.yaml", run, [str(tmp_path / "full.yaml"), "--quick", "--out",
+                             str(tmp_path / "f")], quick=(tmp_path / "small.yaml", check))
 
 
 @functools.lru_cache(maxsize=None)
