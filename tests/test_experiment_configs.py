@@ -60,7 +60,7 @@ def test_every_experiment_has_a_quick_mode_whose_config_ships():
         if name in NO_CONFIG:
             assert '"--quick"' in text and "quick_check(" in text, name
             continue
-        m = re.search(r'quick=\((?:[\w.]+ / )*(?:DEFAULT\.with_name\()?"(\w+\.yaml)"', text)
+        m = re.search(r'quick=\((?:[\w."]+ / )*(?:DEFAULT\.with_name\()?"(\w+\.yaml)"', text)
         assert m and (ROOT / "configs" / m.group(1)).is_file() and "def quick_figures(" in text, name
         assert any(m.group(1) in cfgs for _, cfgs, _, _ in [EXPERIMENTS[name]]), (name, m.group(1))
 
