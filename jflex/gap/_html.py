@@ -70,7 +70,17 @@ def floor_sentence(r: dict) -> str:
             parts.append(f"{k}: {d['floor']:.2f} % (95 % interval {d['low']:.2f}-{d['high']:.2f} %) from {d.get('method')}")
         else:
             parts.append(f"{k}: {d['floor']:.2f} % from {d.get('method')}")
-    return ("Noise floor per validation set: " + "; ".join(parts) + ".") if parts else ""
+    out = ("Noise floor per validation set: " + "; ".join(parts) + ".") if parts else ""
+    t = r.get("test")
+    if t and parts:
+        fac = [f"{k}: {v:.2f} x" for k, v in (t.get("factor") or {}).items() if np.isfinite(v)]
+        cf = [v for d in (t.get("channel_factor") or {}).values() for v in d.values() if np.isfinite(v)]
+        out += (f" A gap is beyond its floor when it exceeds a margin x the floor + {t['min_gap']:g} %, the margin set "
+                f"for a false-alarm rate of {100 * t['family_alpha']:g} % over all {t['tests']} sets and joints tested "
+                "together (from the effective samples of each one's noise)"
+                + (f": {', '.join(fac)} pooled" if fac else "")
+                + (f", {min(cf):.2f}-{max(cf):.2f} x per joint" if cf else "") + ".")
+    return out
 
 
 def data_notes(r: dict) -> list[str]:

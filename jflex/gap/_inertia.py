@@ -35,13 +35,19 @@ class InertiaPrior:
     scale: np.ndarray  # prior std s per parameter
     weight: float  # user's prior weight w (0: bounds and a trace of prior only)
     sigma: float = 0.02  # normalised residual level the prior is weighed against (updated by the fit)
+    reach: float = 2.0  # the box: |delta| <= reach x scale
+
+    def beyond(self, delta, reach: float | None = None) -> np.ndarray:
+        """(10 n,) bool: the parameters of ``delta`` past ``reach`` (default: the box's) x scale."""
+        r = self.reach if reach is None else reach
+        return np.abs(np.asarray(delta, float)) > r * self.scale * (1 + 1e-6)
 
     @property
     def size(self) -> int:
         return self.pi0.size
 
     def bounds(self):
-        return -2.0 * self.scale, 2.0 * self.scale
+        return -self.reach * self.scale, self.reach * self.scale
 
     def penalty(self) -> np.ndarray:
         """Diagonal added to the normal equations of ``delta``."""

@@ -85,7 +85,8 @@ def angle_noise(q):
     """Noise std [rad] per column of sampled angles ``q`` (N, n): the larger of the white-noise
     estimate from the robust spread of the second difference, ``MAD(d2 q) / sqrt(6)``, and the
     quantisation noise ``step / sqrt(12)`` of an encoder whose readings sit on a grid (the second
-    difference of a slowly moving quantised angle is mostly zero, so its MAD alone reads ~0). The
+    difference of a slowly moving quantised angle is mostly zero, so its MAD alone reads ~0, or one
+    count where about half of it is not: the rounding alone, then, whose noise is ``step / sqrt(12)``). The
     step is the smallest nonzero increment when every increment is (near) a whole number of it, or
     when the readings repeat (``REPEATS``: a grid the log's rounding or resampling has blurred)."""
     q = np.asarray(q, dtype=float)
@@ -109,7 +110,11 @@ def angle_noise(q):
             k = np.round(dq / s1)
             if s0 > 0 and (rep[j] or np.all(np.abs(dq / s0 - k) < 0.02) or np.all(np.abs(dq - k * s1) < 0.1 * s1)):
                 step = s0
-        out[j] = max(float(mad[j]), step / np.sqrt(12.0))
+        # on a grid the second difference takes whole counts, about half of them nonzero: its MAD
+        # reads one count (0.6 x the step, twice the rounding's own step/sqrt(12)) though no noise
+        # beyond the rounding is there; only a spread beyond one count is noise of its own
+        one_count = 1.4826 * step / np.sqrt(6.0)
+        out[j] = step / np.sqrt(12.0) if step > 0 and mad[j] <= one_count * (1 + 1e-9) else max(float(mad[j]), step / np.sqrt(12.0))
     return out
 
 
