@@ -125,7 +125,7 @@ def score_case(result: dict, truth: dict) -> dict:
             t = te[0]
             out["top1"] = bool(first is not None and match(first, t))
             out["top1_effect"] = bool(first is not None and match(first, t, joint=False))
-            out["top2"] = any(match(r, t) for r in [rank[0], rank[1]][: len(rank)] + sel[:1] if r is not None) or \
+            out["top2"] = any(match(r, t) for r in rank[:2] + sel[:1] if r is not None) or \
                 any(match(r, t) for r in top2)
         else:
             out["pair_top3"] = all(any(match(r, t) for r in top3) for t in te)
