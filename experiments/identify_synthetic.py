@@ -337,9 +337,18 @@ class IdentifySyntheticConfig(_Strict):
     flexible_link: FlexibleLinkConfig
 
 
+def quick_figures(res) -> dict:
+    """The key figures of ``--quick``, loosely: every estimate of every fit (OLS, WLS and each
+    output-error fit from each start) within ``tolerance_std`` reported standard deviations of
+    the planted value."""
+    tol = res["flexible_link"]["tolerance_std"]
+    return {f"{k}: max |error| [std]": (v["max_abs_error_in_std"], 0.0, tol) for k, v in res["summary"].items()}
+
+
 def main(argv=None):
     return jflex.experiment_cli("identify_synthetic", DEFAULT, run, argv, description=__doc__,
-                                schema=IdentifySyntheticConfig)
+                                schema=IdentifySyntheticConfig,
+                                quick=(DEFAULT.with_name("identify_synthetic_quick.yaml"), quick_figures))
 
 
 if __name__ == "__main__":
