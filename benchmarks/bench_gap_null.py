@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import fnmatch
 import json
+import os
 import pathlib
 import subprocess
 import sys
@@ -121,7 +122,10 @@ def _beyond(r):
 
 def markdown(s: dict, rows: list[dict]) -> str:
     rates = ", ".join(f"{k} {a}/{n}" for k, (a, n) in sorted(s["by_trait"].items()) if a)
-    L = [summary_line(s), "", f"Alarms by trait value (alarms/cases): {rates or 'none'}.", "",
+    L = [f"`python benchmarks/bench_gap_null.py --size {s.get('size', 'full')}` on jflex "
+         f"{', '.join(s.get('commits') or ['unknown'])}; summarised {s.get('date', '')} (load average "
+         f"{s.get('load', 'n/a')} on {s.get('cpus', 'n/a')} cores: the times scale with it).", "", summary_line(s), "",
+         f"Alarms by trait value (alarms/cases): {rates or 'none'}.", "",
          "| case | traits | verdict | selected | gap / floor (upper) [%] | joints beyond their floor: gap/floor [%] | "
          "stop reason | s |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -140,7 +144,11 @@ def write_results(text: str, path: pathlib.Path = RESULTS_MD) -> None:
     """Replace what lies between the null-family markers (appended at the end when absent)."""
     doc = path.read_text()
     if MARK[0] not in doc:
-        doc = doc.rstrip("\n") + "\n\n## Null family (false alarms)\n\n" + MARK[0] + "\n" + MARK[1] + "\n"
+        doc = (doc.rstrip("\n") + "\n\n## Null family (Pinocchio + SciPy): false alarms\n\n"
+               "Nothing planted: the true robot differs from the URDF by CAD errors only (masses 2-10 %, centres of "
+               "mass 0.5-2 cm), its friction is the nominal model's; the logs carry real-log traits, combined "
+               "(benchmarks/gap/independent/null.py). An alarm: a verdict other than within_noise, or any effect "
+               "selected.\n\n" + MARK[0] + "\n" + MARK[1] + "\n")
     a, b = doc.index(MARK[0]) + len(MARK[0]), doc.index(MARK[1])
     path.write_text(doc[:a] + "\n" + text + "\n" + doc[b:])
 
@@ -215,7 +223,9 @@ def main(argv=None):
         else:
             print(f"[{i + 1}/{len(specs)}] {cid}: {row['status']}", flush=True)
     s = summarise(rows)
-    s["commits"] = sorted({r.get("commit", "unknown") for r in rows})
+    s["commits"] = sorted({r.get("commit", "unknown") for r in rows if r.get("commit")})
+    s.update(size=a.size, date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+             load=" ".join(f"{x:.1f}" for x in os.getloadavg()), cpus=os.cpu_count())
     (root / "bench.json").write_text(json.dumps(dict(summary=s, cases=rows), indent=1, default=str))
     md = markdown(s, rows)
     (root / "bench.md").write_text(md)
