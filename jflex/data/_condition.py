@@ -111,17 +111,30 @@ def _gap_band(t, q, h: float, max_gap: float) -> float | None:
     return band if band > 0 else None
 
 
+def _judge_gaps(t, arrays: dict, h: float, max_gap: float, motion: str | None):
+    """The gaps of stamps ``t`` (median step ``h``): ``(indices k of the steps t[k] -> t[k + 1] over
+    ``max_gap`` median steps, the motion's band [Hz] or None, the longest gap bridged [s])``; the
+    longest bridged is ``BRIDGE`` of the shortest period of the motion (0 without a band)."""
+    dt = np.diff(t)
+    gaps = np.flatnonzero(dt > max_gap * h)
+    if not gaps.size:
+        return gaps, None, 0.0
+    band = _gap_band(t, arrays[motion], h, max_gap) if motion is not None and motion in arrays else None
+    return gaps, band, (BRIDGE / band if band else 0.0)
+
+
 def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max_gap: float = MAX_GAP,
-                     field: str = "t", motion: str | None = "q"):
+                     field: str = "t", motion: str | None = "q", bridge_s: float | None = None):
     """``t`` and ``arrays`` (rows at ``t``) as they are if every step is within ``jitter`` of the
     median step, else linearly interpolated onto a uniform grid whose step is the mean of the
     steps that dropped nothing (the median of jittered steps is a noisier estimate of the rate).
 
     A gap (a step over ``max_gap`` median steps) is bridged when it is shorter than ``BRIDGE`` of
     the shortest period of the motion (1 / the band holding ``ENERGY_FRACTION`` of the power of the
-    angles ``arrays[motion]``, read off the longest stretch without a gap); longer gaps, or any gap
-    when there are no angles to judge it by, are refused, every one named with its time and length
-    (the log is then cut there into several data sets).
+    angles ``arrays[motion]``, read off the longest stretch without a gap), or than ``bridge_s``
+    [s] when given (the limit :func:`split_at_gaps` judged over the whole record a stretch was cut
+    from); longer gaps, or any gap when there are no angles to judge it by, are refused, every one
+    named with its time and length (:func:`split_at_gaps` cuts the log there into stretches).
 
     **Returns** ``(t, arrays, report)``: ``rate_hz``, ``jitter_pct`` (largest deviation from the
     median step of the steps that dropped nothing), ``longest_step`` (in median steps),
@@ -146,18 +159,22 @@ def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max
     if dev <= jitter:
         report["rate_hz"] = 1.0 / float(dt.mean())
         return t, arrays, report
-    gaps = np.flatnonzero(dt > max_gap * h)
+    gaps, band, longest = _judge_gaps(t, arrays, h, max_gap, motion)
+    if bridge_s is not None:
+        longest = float(bridge_s)
     if gaps.size:
-        band = _gap_band(t, arrays[motion], h, max_gap) if motion is not None and motion in arrays else None
-        longest = BRIDGE / band if band else 0.0
         report["gaps"] = [{"t_s": float(t[k]), "length_s": float(dt[k]), "steps": float(dt[k] / h)} for k in gaps]
-        if band:
+        if band or bridge_s is not None:
             report["gap_bridge_limit_s"] = longest
         long = [k for k in gaps if dt[k] > longest]
         if long:
-            why = (f"longer than {BRIDGE:g} of the motion's shortest period ({longest:.3g} s, its band {band:.3g} Hz): "
-                   "interpolation would invent the motion in it") if band else \
-                ("no angles to judge it against: interpolation could invent the data in it")
+            if bridge_s is not None:
+                why = f"longer than the {longest:.3g} s bridged in the record it was cut from"
+            elif band:
+                why = (f"longer than {BRIDGE:g} of the motion's shortest period ({longest:.3g} s, its band {band:.3g} "
+                       "Hz): interpolation would invent the motion in it")
+            else:
+                why = "no angles to judge it against: interpolation could invent the data in it"
             named = "; ".join(f"a gap of {dt[k]:.6g} s after t = {t[k]:.6g} s ({dt[k] / h:.1f} median steps)" for k in long)
             raise DataError(f"{where}: field '{field}': {named}: {len(long)} gap(s) over {max_gap:g} median steps of "
                             f"{h:.6g} s {why}; cut the log at each into separate data sets")
@@ -174,6 +191,39 @@ def resample_uniform(t, arrays: dict, where: str, *, jitter: float = JITTER, max
         out[key] = r.reshape((grid.size,) + a.shape[1:])
     report.update(rate_hz=1.0 / step, resampled=True, samples_in=int(t.size), samples_out=int(grid.size))
     return grid, out, report
+
+
+def split_at_gaps(t, arrays: dict, where: str, *, max_gap: float = MAX_GAP, motion: str | None = "q"):
+    """Where a log must be cut: at every gap :func:`resample_uniform` would refuse (over ``max_gap``
+    median steps and longer than ``BRIDGE`` of the motion's shortest period, judged as it judges
+    them, on the stamps :func:`clean_stamps` keeps), so that each stretch between them is a record
+    of its own; the shorter gaps stay inside a stretch, to be bridged.
+
+    **Returns** None when no gap needs a cut (the log is conditioned whole, as before), else
+    ``(stretches, report)``: ``stretches`` a list, in time order, of ``(start_s, end_s)`` (the
+    first and last kept stamps of each stretch: the rows of ``t`` within them, ends included, are
+    the stretch's), and the report ``gaps`` (every gap: ``t_s``, ``length_s``, ``steps`` and the
+    ``action``, ``split`` or ``bridged by linear interpolation``), ``gap_bridge_limit_s`` (the
+    longest gap bridged, to pass to each stretch's :func:`resample_uniform` as ``bridge_s``: a
+    stretch judged on its own could read another band) and ``motion_band_hz`` (None: no angles,
+    or no stretch of 256 samples, to read it from; every gap is then cut)."""
+    tc, ac, _ = clean_stamps(t, arrays, where)
+    dt = np.diff(tc)
+    if tc.size < 2 or not np.any(dt > 0):
+        return None
+    h = float(np.median(dt))
+    if not h > 0 or float(np.max(np.abs(dt - h)) / h) <= JITTER:
+        return None
+    gaps, band, longest = _judge_gaps(tc, ac, h, max_gap, motion)
+    cut = [int(k) for k in gaps if dt[k] > longest]
+    if not cut:
+        return None
+    report = {"gaps": [{"t_s": float(tc[k]), "length_s": float(dt[k]), "steps": float(dt[k] / h),
+                        "action": "split" if k in cut else "bridged by linear interpolation"} for k in gaps],
+              "gap_bridge_limit_s": longest, "motion_band_hz": band}
+    first = [0] + [k + 1 for k in cut]
+    last = cut + [tc.size - 1]
+    return [(float(tc[a]), float(tc[b])) for a, b in zip(first, last)], report
 
 
 def merge_on_time(parts, where: str):
@@ -349,13 +399,16 @@ def replace_by_interpolation(x, idx) -> np.ndarray:
     return x
 
 
-def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_spikes: bool = False):
+def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_spikes: bool = False,
+                     bridge_s: float | None = None):
     """Condition one torque record: stamps cleaned and made uniform, torque channels checked.
 
     ``arrays``: ``q`` (N, m), ``tau`` (N, n) with ``joints`` (n,) naming the torque columns,
     optional ``qd``/``qdd``/``q_extra`` rows. Torque channels flagged by :func:`channel_quality`
     with one of ``EXCLUDE_FLAGS`` are listed as excluded unless their joint is in ``keep``.
-    Spikes are counted per channel and replaced only when ``replace_spikes``.
+    Spikes are counted per channel and replaced only when ``replace_spikes``. ``bridge_s``: the
+    longest gap bridged, for a stretch :func:`split_at_gaps` cut from a longer log (see
+    :func:`resample_uniform`).
 
     **Returns** ``(t, arrays, report, excluded)``: the report holds ``sampling`` (the stamps:
     rate, jitter, drops, repeats, resampled), ``channels`` (per torque joint: flags and the
@@ -365,7 +418,7 @@ def condition_torque(t, arrays: dict, joints, where: str, *, keep=(), replace_sp
     rows = {k: v for k, v in arrays.items() if np.ndim(v) >= 1 and np.shape(v)[0] == np.size(t)}
     rest = {k: v for k, v in arrays.items() if k not in rows}
     t, rows, rep_stamps = clean_stamps(t, rows, where)
-    t, rows, rep_rate = resample_uniform(t, rows, where)
+    t, rows, rep_rate = resample_uniform(t, rows, where, bridge_s=bridge_s)
     angle_jumps(t, rows["q"], where, joints)
     report = {"sampling": {**rep_rate, **rep_stamps}}
     tau = np.asarray(rows["tau"], float).copy()

@@ -18,7 +18,7 @@ from .._config import load_robot
 from .._errors import ConfigError, DataError, JFlexError
 from .._runs import load_yaml
 from .._schema import validate
-from ..data._condition import condition_torque
+from ..data._condition import BRIDGE, MAX_GAP, condition_torque, split_at_gaps
 from ..data._npz import load_npz_fields
 from ..data._posture import yaml_posture as yaml_posture
 from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, RobotSpec, file_format
@@ -39,6 +39,10 @@ class Dataset:
     joints whose torque channel it found dead, flat, stuck, saturated or few-level and that the
     case does not keep (``options.keep_channels``): the gap leaves them out. ``channels`` holds
     the per-channel metadata (:class:`jflex.data.Channel`), ``files`` every file read.
+
+    A torque log with gaps too long to bridge gives one data set per stretch between them, named
+    ``<name>#k`` (k counting the stretches in time order), each with the log's split, file and
+    settings; ``conditioning["sampling"]["split_from"]`` says which stretch it is and lists the gaps.
     """
 
     kind: str
@@ -151,10 +155,17 @@ def _columns(arrs, path, robot, width_field: str, width: int):
     return list(range(width)), [], ()
 
 
-def _torque(arrs, path, robot, options=None):
+def _torque(arrs, path, robot, options=None, *, split: bool = False):
     """The torque data set's arrays in model joint order, conditioned (:func:`jflex.data.condition_torque`:
     stamps made uniform, torque channels checked). **Returns** ``(arrays, extra joints, report,
-    excluded joints)``."""
+    excluded joints)``.
+
+    With ``split``, a log with gaps too long to bridge is cut at them
+    (:func:`jflex.data._condition.split_at_gaps`) and each stretch conditioned on its own:
+    **returns** ``(stretches, split report, extra joints)``, ``stretches`` a list in time order of
+    ``((start_s, end_s, raw rows) or None, (arrays, report, excluded) or None)`` (None: a stretch
+    under ``MIN_WINDOW_SAMPLES`` rows; a log without such gaps is one stretch, ``(None, ...)``,
+    and the report None)."""
     options = options or {}
     for k in ("t", "q", "tau"):
         if k not in arrs:
@@ -196,9 +207,32 @@ def _torque(arrs, path, robot, options=None):
         raise DataError(f"{path}: field 't': time must be strictly increasing (a set with tau_repeats is not resampled)")
     if reps is not None:
         rows["tau_repeats"] = np.moveaxis(reps, 0, 1)  # rows first, so conditioning keeps them aligned
+    if not split:
+        out, report, excluded = _conditioned(t, rows, path, robot, options)
+        return out, extra_names, report, excluded
+    cut = split_at_gaps(t, rows, str(path))
+    if cut is None:
+        return [(None, _conditioned(t, rows, path, robot, options))], None, extra_names
+    stretches, split_report = cut
+    out = []
+    for a, b in stretches:
+        m = (t >= a) & (t <= b)
+        part = {k: v[m] for k, v in rows.items()}
+        if m.sum() < MIN_WINDOW_SAMPLES:
+            out.append(((a, b, int(m.sum())), None))
+            continue
+        out.append(((a, b, int(m.sum())), _conditioned(t[m], part, path, robot, options,
+                                                        split_report["gap_bridge_limit_s"])))
+    return out, split_report, extra_names
+
+
+def _conditioned(t, rows, path, robot, options, bridge_s=None):
+    """:func:`jflex.data.condition_torque` on the rows of one record (or of one stretch of it, with
+    the longest gap bridged in the whole record ``bridge_s``), derivatives filled in.
+    **Returns** ``(arrays, report, excluded joints)``."""
     t, out, report, excluded = condition_torque(
         t, rows, list(robot.joint_names), str(path), keep=tuple(options.get("keep_channels") or ()),
-        replace_spikes=bool(options.get("replace_spikes", False)))
+        replace_spikes=bool(options.get("replace_spikes", False)), bridge_s=bridge_s)
     if "tau_repeats" in out:
         out["tau_repeats"] = np.moveaxis(out["tau_repeats"], 1, 0)
     out["t"] = t
@@ -210,7 +244,77 @@ def _torque(arrs, path, robot, options=None):
         out["qd"] = np.gradient(out["q"], t, axis=0)
     if "qdd" not in out:
         out["qdd"] = np.gradient(out["qd"], t, axis=0)
-    return out, extra_names, report, excluded
+    return out, report, excluded
+
+
+STRETCH_MARK = "#"  # a stretch of a split log is named <data set>#<k>, k counting its stretches in time order
+
+
+def _too_short(data, report, options) -> str | None:
+    """Why a stretch cut from a log is too short for the diagnosis' processing of it
+    (:func:`jflex.gap.torque_set`, with the case's ``filter_cutoff_hz`` and ``decimate``), or None:
+    angles low-passed there lose ``EDGE_PERIODS`` periods of the cutoff at each end to the filter's
+    transients and keep at least 20 samples per decimation step between them."""
+    from ..data._condition import choose_cutoff
+    from ._torque import CUTOFF_FACTOR, CUTOFF_LIMIT, EDGE_PERIODS
+
+    t = data["t"]
+    if report.get("derivatives") == "given":  # used as they are, unfiltered
+        return None
+    k = int(options.get("decimate") or 1)
+    h = float(np.mean(np.diff(t)))
+    fc = options.get("filter_cutoff_hz")
+    if fc in (None, "auto"):
+        qd = data["qd"] if report.get("derivatives") == "velocity" else None
+        fc, _ = choose_cutoff(data["q"], h, qd=qd, factor=CUTOFF_FACTOR, decimate=k, limit=CUTOFF_LIMIT)
+    edge = int(np.ceil(EDGE_PERIODS / fc / h))
+    if t.size - 2 * edge >= 20 * k:
+        return None
+    return (f"its low-pass at {fc:.3g} Hz loses {edge * h:.3g} s at each end to its transients, leaving "
+            f"{max(t.size - 2 * edge, 0)} of the {20 * k} samples needed")
+
+
+def _stretches(stretches, split_report, base: str, path, options):
+    """The data sets of one torque log (:func:`_torque` with ``split``): ``(kept, notes)``, ``kept``
+    a list of ``(name, (arrays, report, excluded), split_from)``. A log conditioned whole keeps its
+    name and ``split_from`` None. A log cut at gaps too long to bridge gives one data set per
+    stretch, ``base#k`` (k counting every stretch in time order), each with ``split_from`` (the
+    record, the stretch, its span and every gap of the log); a stretch too short to be processed
+    is dropped. ``notes``: the sentences saying so, for the user and the report."""
+    if split_report is None:
+        (_, result), = stretches
+        return [(base, result, None)], []
+    gaps = split_report["gaps"]
+    cut = [g for g in gaps if g["action"] == "split"]
+    total = len(stretches)
+    kept, dropped = [], []
+    for k, ((a, b, rows), result) in enumerate(stretches, start=1):
+        name = f"{base}{STRETCH_MARK}{k}"
+        why = (f"{rows} sample(s), fewer than {MIN_WINDOW_SAMPLES}" if result is None
+               else _too_short(*result[:2], options))
+        if why is not None:
+            dropped.append(f"'{name}' ({a:.6g} to {b:.6g} s, {rows} samples: {why})")
+            continue
+        split_from = {"record": base, "stretch": k, "stretches": total, "span_s": [a, b], "samples_in": rows,
+                      "gaps": gaps, "gap_bridge_limit_s": split_report["gap_bridge_limit_s"]}
+        kept.append((name, result, split_from))
+    limit, band = split_report["gap_bridge_limit_s"], split_report.get("motion_band_hz")
+    rule = (f"longer than {limit:.3g} s, {100 * BRIDGE:g} % of the shortest period of its motion (band {band:.3g} "
+            "Hz), so interpolation would invent the motion in them") if band else \
+        f"with no stretch of 256 samples to read the motion's band from, every gap over {MAX_GAP:g} median steps"
+    named = "; ".join(f"{g['length_s']:.6g} s after t = {g['t_s']:.6g} s" for g in cut)
+    bridged = len(gaps) - len(cut)
+    if not kept:
+        raise DataError(f"{path}: field 't': {len(cut)} gap(s) too long to bridge ({rule}: {named}) cut the log into "
+                        f"{total} stretches, none long enough to be processed: {'; '.join(dropped)}; expected a "
+                        "stretch between gaps longer than the low-pass' transients (or a log without such gaps)")
+    notes = [f"'{base}' ({pathlib.Path(path).name}) is split at {len(cut)} gap(s) too long to bridge ({rule}): "
+             f"{named}; its data sets are " + ", ".join(f"'{n}' ({s['span_s'][0]:.6g} to {s['span_s'][1]:.6g} s)"
+                                                       for n, _, s in kept)
+             + (f"; {bridged} shorter gap(s) bridged by interpolation" if bridged else "")]
+    if dropped:
+        notes.append(f"'{base}': stretch(es) between gaps too short to be processed, dropped: {'; '.join(dropped)}")
+    return kept, notes
 
 
 def _posture(arrs, path, robot):
@@ -564,7 +668,10 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
       folder (absolute paths, ``..``); off by default, so a case reads only its own files.
 
     **Returns:** a :class:`Case`. Raises :class:`jflex.ConfigError` / :class:`jflex.DataError`
-    naming the file and field of the first problem found. The schema of ``case.yaml`` is
+    naming the file and field of the first problem found. A torque log with gaps too long to
+    bridge is split at them into several data sets (see :class:`Dataset`), a stretch too short
+    for the low-pass dropped; both are warned of (a ``UserWarning``, kept in ``Case.warnings`` and
+    the first stretch's ``conditioning["warnings"]``). The schema of ``case.yaml`` is
     :class:`jflex.gap._schema.CaseSpec` (the table in ``docs/case_format.md``).
     """
     from ..data._csv import read_csv
@@ -615,7 +722,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         except JFlexError:
             raise _err(file, "tool_frame", f"unknown frame {tool!r}; frames: {list(robot.link_names) + list(robot.frame_names)}") from None
     nominal = _nominal(spec.nominal_effects, robot, file)
-    datasets = []
+    datasets, specs, split_notes = [], [], []
     for i, d in enumerate(spec.datasets):
         fld = f"datasets[{i}]"
         if d.kind == "frf" and tool is None:
@@ -638,13 +745,28 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
             rec.conditioning["window_s"] = list(d.window)
         cond, excluded = dict(rec.conditioning), ()
         if d.kind == "torque":
-            data, extra, report, excluded = _torque(rec.arrays, fpath, robot, spec.options.model_dump())
-            if "sampling" in cond:  # the reader resampled already: its numbers describe the raw stamps
-                report["sampling"] = {**report["sampling"], **cond.pop("sampling")}
-            cond.update(report)
-            for j, c in report["channels"].items():
-                if c["flags"]:
-                    rec.flag(f"tau:{j}", *c["flags"])
+            options = spec.options.model_dump()
+            stretches, split_report, extra = _torque(rec.arrays, fpath, robot, options, split=True)
+            kept, notes_split = _stretches(stretches, split_report, d.name or fpath.stem, fpath, options)
+            for piece_name, (data, report, excluded), split_from in kept:
+                pcond, channels = dict(cond), dict(rec.channels)
+                if "sampling" in pcond:  # the reader resampled already: its numbers describe the raw stamps
+                    report["sampling"] = {**report["sampling"], **pcond.pop("sampling")}
+                if split_from is not None:
+                    report["sampling"]["split_from"] = split_from
+                pcond.update(report)
+                piece = Record(rec.arrays, channels)
+                for j, c in report["channels"].items():
+                    if c["flags"]:
+                        piece.flag(f"tau:{j}", *c["flags"])
+                datasets.append(Dataset(d.kind, fpath, d.split, piece_name, data, extra, pcond, excluded,
+                                        piece.channels, tuple(fpaths)))
+                specs.append(d)
+            for msg in notes_split:
+                warnings.warn(msg, UserWarning, stacklevel=2)
+                datasets[-len(kept)].conditioning.setdefault("warnings", []).append(msg)
+            split_notes += notes_split
+            continue
         else:
             arrs = rec.arrays
             if d.kind == "response":
@@ -657,6 +779,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
                        "are positions of the tool frame")
         datasets.append(Dataset(d.kind, fpath, d.split, d.name or fpath.stem, data, extra, cond, excluded,
                                 rec.channels, tuple(fpaths)))
+        specs.append(d)
     names = [d.name for d in datasets]
     if len(set(names)) != len(names):
         raise _err(file, "datasets", f"data set names must be unique, got {names}")
@@ -665,7 +788,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
     if not any(d.split == "validation" for d in datasets):
         raise _err(file, "datasets", "no data set has split: validation (the gap is judged on held-out data)")
     _refuse_long_delay(nominal, datasets, file)
-    sets_notes = _held_out_notes(spec, datasets) + _short_training_notes(spec, nominal, datasets, robot)
+    sets_notes = _held_out_notes(specs, datasets) + _short_training_notes(spec, nominal, datasets, robot)
     for d, msg in sets_notes:
         warnings.warn(msg, UserWarning, stacklevel=2)
         d.conditioning.setdefault("warnings", []).append(msg)
@@ -676,7 +799,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
     # defaults filled
     noise = spec.noise.model_dump(exclude_none=True)
     return Case(file, robot, tool, nominal, datasets, noise, spec.options.model_dump(),
-                notes + [m for _, m in sets_notes])
+                notes + split_notes + [m for _, m in sets_notes])
 
 
 DELAY_SHARE = 0.1  # a nominal sensor delay is a small lag of the record, at most this share of it
@@ -706,15 +829,16 @@ def _span(window):
     return float(a), float("inf") if b is None else float(b)
 
 
-def _held_out_notes(spec, datasets) -> list:
+def _held_out_notes(specs, datasets) -> list:
     """``(validation set, sentence)`` for each validation set that holds the same samples as a
     training set (the same file and overlapping windows, or the same torques): the gap is then
-    judged on data the model was fitted on, and nothing is held out."""
+    judged on data the model was fitted on, and nothing is held out. ``specs``: the case.yaml
+    entry of each data set (the stretches of a split log share theirs)."""
     out = []
-    for v, vs in zip(datasets, spec.datasets):
+    for v, vs in zip(datasets, specs):
         if v.split != "validation":
             continue
-        for t, ts in zip(datasets, spec.datasets):
+        for t, ts in zip(datasets, specs):
             if t.split != "train" or t.kind != v.kind:
                 continue
             (a0, a1), (b0, b1) = _span(ts.window), _span(vs.window)

@@ -135,6 +135,15 @@ def _stamps(s: dict) -> str:
     if s.get("resampled"):
         parts.append(f"resampled ({s.get('samples_in', '?')} -> {s.get('samples_out', '?')} samples)"
                      if "samples_in" in s else "resampled")
+    gaps = [g for g in s.get("gaps") or () if isinstance(g, dict)]
+    if gaps:
+        parts.append(f"{len(gaps)} gap(s) bridged (longest {max(g.get('length_s', 0.0) for g in gaps):.3g} s)")
+    cut = s.get("split_from")
+    if isinstance(cut, dict):  # a stretch of a log cut at gaps too long to bridge (jflex.gap.load_case)
+        n = sum(1 for g in cut.get("gaps") or () if isinstance(g, dict) and g.get("action") == "split")
+        a, b = (list(cut.get("span_s") or ()) + [float("nan")] * 2)[:2]
+        parts.append(f"stretch {cut.get('stretch')} of {cut.get('stretches')} of '{cut.get('record')}' "
+                     f"({a:.6g} to {b:.6g} s), cut at {n} gap(s)")
     return ", ".join(parts)
 
 
