@@ -71,6 +71,7 @@ def out_of_range(name: str, value: float, lo: float, hi: float, unit: str = "", 
 
 
 PSEUDO_INERTIA_TOL = 1e-6  # relative to its largest eigenvalue: rounding, not a body's inertia
+NEAREST_ITERATIONS = 5000  # at most, of the nearest rigid body's projected gradient (a few hundred on a planar arm)
 
 
 def payload_implausible(theta) -> str | None:
@@ -112,29 +113,65 @@ def _from_pseudo_inertia(J) -> np.ndarray:
     return np.array([J[3, 3], *J[:3, 3], I[0, 0], I[0, 1], I[1, 1], I[0, 2], I[1, 2], I[2, 2]])
 
 
-def nearest_rigid_body(theta, S) -> np.ndarray:
+def _body_map() -> np.ndarray:
+    """(10, 10): inertial parameters from a pseudo-inertia's Frobenius-normed entries (linear)."""
+    return np.stack([_from_pseudo_inertia(_mat(e)) for e in np.eye(10)], axis=1)
+
+
+_IU = np.triu_indices(4)
+_W = np.where(_IU[0] == _IU[1], 1.0, np.sqrt(2.0))  # a symmetric matrix's entries, Frobenius-normed
+
+
+def _vec(J):
+    return J[_IU] * _W
+
+
+def _mat(v):
+    J = np.zeros((4, 4))
+    J[_IU] = v / _W
+    return J + np.triu(J, 1).T
+
+
+def _psd(v):
+    lam, U = np.linalg.eigh(_mat(v))
+    return _vec((U * np.maximum(lam, 0.0)) @ U.T)
+
+
+_BODY_MAP = _body_map()
+
+
+def nearest_rigid_body(theta, S, *, iterations: int = NEAREST_ITERATIONS, rtol: float = 1e-13) -> np.ndarray:
     """The inertial parameters of a rigid body (positive semi-definite pseudo-inertia) nearest to
-    ``theta`` in the metric ``S`` (10 x 10): ``min (p - theta)' S (p - theta)`` over ``p`` whose
-    pseudo-inertia is ``L L'`` (``L`` lower triangular: every such ``p`` is some body's, and only
-    those; Rucker and Wensing, "Smooth parameterization of rigid-body inertia"), started from the
-    pseudo-inertia with its negative eigenvalues cut."""
-    import scipy.optimize as so
-
+    ``theta`` in the metric ``S`` (10 x 10, positive semi-definite): ``min (p - theta)' S (p - theta)``
+    over the bodies. The parameters are linear in the pseudo-inertia, so this is a convex problem
+    over the cone of positive semi-definite 4 x 4 matrices, solved by accelerated projected
+    gradient (FISTA, restarted when the cost rises; the projection cuts the negative eigenvalues).
+    ``S`` is singular where the data see nothing (a planar motion sees no out-of-plane moment):
+    any body is as near there, and a local search scaled by the seen directions stalled."""
     theta = np.asarray(theta, float)
-    w, V = np.linalg.eigh(S)
-    C = (V * np.sqrt(np.maximum(w, 1e-12 * max(float(w.max()), 1e-300)))).T  # C'C ~ S
-    lam, U = np.linalg.eigh(_pseudo_inertia(theta))
-    J0 = (U * np.maximum(lam, 1e-9 * max(float(lam.max()), 1e-12))) @ U.T
-    L0 = np.linalg.cholesky(J0 + 1e-12 * np.eye(4))
-    tri = np.tril_indices(4)
+    A = _BODY_MAP
+    H = A.T @ S @ A
+    g0 = A.T @ S @ theta
+    L = 2.0 * max(float(np.linalg.eigvalsh(H)[-1]), 1e-300)
 
-    def params(v):
-        L = np.zeros((4, 4))
-        L[tri] = v
-        return _from_pseudo_inertia(L @ L.T)
+    def cost(v):
+        r = A @ v - theta
+        return float(r @ S @ r)
 
-    r = so.least_squares(lambda v: C @ (params(v) - theta), L0[tri], method="lm", xtol=1e-12, ftol=1e-12)
-    return params(r.x)
+    x = _psd(_vec(_pseudo_inertia(theta)))
+    y, t, fx = x.copy(), 1.0, cost(x)
+    for k in range(iterations):
+        xn = _psd(y - 2.0 * (H @ y - g0) / L)
+        tn = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
+        fn = cost(xn)
+        y = xn + ((t - 1.0) / tn) * (xn - x)
+        if fn > fx:  # momentum overshot: restart from the last point
+            y, tn = xn.copy(), 1.0
+        done = k > 10 and abs(fx - fn) <= rtol * max(fx, 1e-300)
+        x, t, fx = xn, tn, fn
+        if done or fx == 0.0:
+            break
+    return A @ x
 
 
 def torque_share_implausible(term, theta, sets) -> str | None:
