@@ -177,6 +177,8 @@ def main(argv=None):
     p.add_argument("--in-process", action="store_true", help="diagnose in this process (no time limit)")
     p.add_argument("--jflex-src", default=None, help="a jflex source tree to import instead of the installed one")
     p.add_argument("--write-results", action="store_true", help="write summary and table into bench_gap_results.md")
+    p.add_argument("--summarise-only", action="store_true",
+                   help="diagnose nothing: summarise the results already in the run folder (e.g. while a run goes on)")
     a = p.parse_args(argv)
     root = pathlib.Path(a.out or f"runs/gap-null-{a.size}")
     for sub in ("cases", "diagnoses", "results"):
@@ -189,6 +191,9 @@ def main(argv=None):
         cid = spec["id"]
         res_path = root / "results" / f"{cid}.json"
         folder = root / "cases" / cid
+        if a.summarise_only and not res_path.is_file():
+            rows.append(dict(id=cid, trait=cid.split("_", 2)[-1], status="not run yet"))
+            continue
         if not res_path.is_file():
             stamp = folder / "spec.json"
             if not (stamp.is_file() and json.loads(stamp.read_text()) == spec):
@@ -223,7 +228,7 @@ def main(argv=None):
         else:
             print(f"[{i + 1}/{len(specs)}] {cid}: {row['status']}", flush=True)
     s = summarise(rows)
-    s["commits"] = sorted({r.get("commit", "unknown") for r in rows if r.get("commit")})
+    s["commits"] = sorted({r["commit"] for r in rows if r.get("commit")})
     s.update(size=a.size, date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
              load=" ".join(f"{x:.1f}" for x in os.getloadavg()), cpus=os.cpu_count())
     (root / "bench.json").write_text(json.dumps(dict(summary=s, cases=rows), indent=1, default=str))
