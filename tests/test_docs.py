@@ -20,9 +20,7 @@ DOCS = ROOT / "docs"
 PAGES = sorted(DOCS.glob("*.md"))
 BLOCKS = [(page.name, i, code, why) for page in PAGES for i, (code, why) in enumerate(python_blocks(page))]
 # Blocks of pages that are sketches by design, with the reason; each is still checked to compile.
-SKETCHES = {
-    ("case_format.md", 0): "the candidate example uses MyCogging, the reader's own effect class, defined nowhere",
-}
+SKETCHES = {}
 API = {"jflex": "jflex", "effects": "jflex.effects", "linear": "jflex.linear", "identify": "jflex.identify",
        "gap": "jflex.gap", "data": "jflex.data", "fem": "jflex.fem"}
 
