@@ -119,3 +119,22 @@ def test_nearest_rigid_body_is_a_body_and_locally_nearest():
         assert cost(q) >= cost(p) - 1e-9 * max(cost(p), 1e-12)
     # a body is left as it is
     assert nearest_rigid_body is not None and payload_implausible(_sphere(1.0, [0, 0, 0.1], 0.05)) is None
+
+
+def test_velocity_lag_of_a_backward_difference_is_half_a_sample():
+    """A drive that logs the backward difference of its encoder reads its velocity h/2 late; logged
+    exactly (the derivative of the angle), no lag."""
+    from jflex.identify._signal import velocity_lag
+
+    h = 1e-3
+    t = np.arange(6000) * h
+    q = np.stack([0.8 * np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 1.9 * t + 0.4),
+                  0.5 * np.cos(2 * np.pi * 1.1 * t)], axis=1)
+    step = 2 * np.pi / 2**16
+    qq = np.round(q / step) * step  # an encoder's counts
+    back = np.vstack([np.zeros((1, 2)), np.diff(qq, axis=0) / h])
+    exact = np.stack([0.8 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t)
+                      + 0.3 * 2 * np.pi * 1.9 * np.cos(2 * np.pi * 1.9 * t + 0.4),
+                      -0.5 * 2 * np.pi * 1.1 * np.sin(2 * np.pi * 1.1 * t)], axis=1)
+    assert velocity_lag(qq, back, h, 10.0) == pytest.approx(h / 2, rel=0.05)
+    assert abs(velocity_lag(q, exact, h, 10.0)) < 0.02 * h

@@ -25,7 +25,7 @@ from .._dynamics import rnea
 from .._errors import DataError
 from .._sweep import flagged_vmap
 from ..identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
-                                motion_band, zero_phase_lowpass)
+                                motion_band, velocity_lag, zero_phase_lowpass)
 
 
 
@@ -115,6 +115,7 @@ _rigid_batch = flagged_vmap(_rigid_row, in_axes=(None, 0, 0, 0))  # (N, n), (N, 
 
 CUTOFF_FACTOR = 2.5  # the parallel low-pass sits at 2.5 x the motion's band (2-5 x is usual)
 CUTOFF_LIMIT = 0.8  # x Nyquist: the highest cutoff "auto" gives a record (jflex.data.choose_cutoff)
+VELOCITY_LAG_MIN = 0.1  # x the sample step: logged velocities lagging the angles by more are moved back
 NOISE_DRAWS = 4  # angle-noise redraws propagated through the processing and the model (noise floor)
 NOISE_BAND = (1.5, 4.0)  # x the motion band: where the raw torque's noise level is read
 EDGE_PERIODS = 2.0  # periods of the cutoff trimmed off each end of a filtered record (transients)
@@ -193,6 +194,12 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
         return qf, qdf, np.gradient(qdf, h, axis=0)
 
     sig_qd = angle_noise(rows["qd"]) if velocity_only else None
+    lag = velocity_lag(q_raw, rows["qd"], h, fc) if velocity_only else 0.0
+    if abs(lag) > VELOCITY_LAG_MIN * h:
+        # velocities logged late (a backward difference of the encoder: half a sample) against the
+        # angles they come with: the model would see a velocity and an acceleration that lag the
+        # posture, a repeating error no floor holds (1 % of the torque on a planar arm)
+        rows["qd"] = shift(rows["qd"], t, -lag)
     q, qd, qdd = derive(q_raw, rows.get("qd"))
     tau = zero_phase_lowpass(tau_raw, h, fc)
     # noise of the filtered torque: the raw torque's PSD above the band (measured), extrapolated
@@ -229,6 +236,7 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
                                   mode="nearest")[sl]
     processing = {"angle_noise_rad": sig_q.tolist(), "motion_band_hz": f_m_report, "cutoff_hz": fc, "decimate": k,
                   "cutoff_method": cut["method"], "cutoff": cut, "sampling": sampling,
+                  "velocity_lag_s": lag if abs(lag) > VELOCITY_LAG_MIN * h else 0.0,
                   "derivatives": "velocities filtered, then differentiated" if velocity_only else
                   "angles filtered, then differentiated twice", "trimmed_s": edge * h,
                   "torque_noise_nm": np.sqrt(var_tau).tolist(), "propagated_angle_noise_nm": np.sqrt(var_q).tolist()}

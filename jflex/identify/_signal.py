@@ -210,3 +210,22 @@ def band_noise_psd(x, dt: float, f_lo: float, f_hi: float):
         return np.zeros(x.shape[1]), f, P
     return np.median(P[m], axis=0), f, P
 
+
+
+def velocity_lag(q, qd, dt: float, cutoff: float) -> float:
+    """The lag [s] of logged velocities ``qd`` (N, n) behind the rate of the logged angles ``q``,
+    both low-passed at ``cutoff`` [Hz]: the least-squares ``tau`` of ``qd(t) = dq/dt(t - tau)``
+    to first order, ``qd - dq/dt = -tau d2q/dt2``, pooled over the joints. A drive that logs the
+    backward difference of its encoder reads its velocity half a sample late (``dt / 2``), an
+    observer or a filter more; the model then sees a motion whose velocity lags its angle."""
+    q, qd = np.asarray(q, float), np.asarray(qd, float)
+    qf = zero_phase_lowpass(q, dt, cutoff)
+    v = np.gradient(qf, dt, axis=0)
+    a = np.gradient(v, dt, axis=0)
+    vl = zero_phase_lowpass(qd, dt, cutoff)
+    k = max(int(np.ceil(2.0 / (cutoff * dt))), 2)  # the filter's transients at both ends
+    if len(q) <= 4 * k:
+        return 0.0
+    e, a = (vl - v)[k:-k], a[k:-k]
+    den = float(np.sum(a * a))
+    return float(-np.sum(e * a) / den) if den > 0 else 0.0
