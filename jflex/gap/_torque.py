@@ -45,7 +45,7 @@ class TorqueSet:
     tau: np.ndarray
     F0: np.ndarray  # rigid inverse dynamics of the nominal (CAD) robot
     scale: np.ndarray  # (n,) std of the measured torque per joint
-    Y: np.ndarray  # (N, n, 10 n) joint-torque regressor along the motion
+    Y: np.ndarray  # (N, n, 10 n) joint-torque regressor along the motion (see y_filtered)
     q_extra: np.ndarray
     extra_joints: tuple
     robot: object = None
@@ -56,6 +56,7 @@ class TorqueSet:
     # (N, n) 1 where a measured torque enters the fits and the gap, 0 where it does not (a clipping
     # sensor's samples, widened by the filter's reach); None: every sample enters
     weight: np.ndarray | None = None
+    y_filtered: bool = False  # Y holds the regressor through the parallel filter (its raw copy dropped)
 
     def row_weights(self) -> np.ndarray:
         """(N, n) weights of the fits' rows: each joint's ``1 / scale`` times :attr:`weight`."""
@@ -342,13 +343,45 @@ def _product(s: TorqueSet, key, make):
 
 
 def term_columns(term: "TorqueTerm", s: TorqueSet) -> np.ndarray:
-    """(N, n, k) columns of ``term`` on ``s``, through the set's parallel filter (cached)."""
-    return _product(s, ("cols", term), lambda: s.lp(term.columns(s)))
+    """(N, n, k) columns of ``term`` on ``s``, through the set's parallel filter (cached). On a
+    filtered set, what the term's ``columns`` put into the cache and is no larger than its filtered
+    columns (its own unfiltered copy) is dropped once they are made; a larger block several terms
+    share (a family's columns at every joint) stays."""
+    key = ("cols", term)
+    if key not in s.cache:
+        made = set(s.cache)
+        cols = s.lp(term.columns(s))
+        if s.cutoff is not None:
+            # every fit reads only the filtered columns: the unfiltered copies of the tried terms (a
+            # play's grid of widths, each a rigid-torque change at every joint) held 0.4 GB of a
+            # 5 kHz 6-joint log's 2.6 GB, besides their filtered twins. One dropped that a later
+            # term needs is made again, by the same deterministic computation
+            for k in set(s.cache) - made:
+                own = _nbytes(s.cache[k], len(s.t)) <= cols.nbytes
+                if own and not (isinstance(k, tuple) and k[0] in ("cols", "lp")):
+                    del s.cache[k]
+        s.cache[key] = cols
+    return s.cache[key]
+
+
+def _nbytes(v, rows: int) -> int:
+    """Bytes of the per-sample arrays (``rows`` long) in a cache entry (an array or a tuple holding
+    some); an entry without any (a product's few numbers) counts as infinitely large: it is kept."""
+    parts = v if isinstance(v, tuple) else (v,)
+    per_sample = [x for x in parts if isinstance(x, np.ndarray) and x.ndim and x.shape[0] == rows]
+    return sum(x.nbytes for x in parts if isinstance(x, np.ndarray)) if per_sample else np.iinfo(np.int64).max
 
 
 def _filtered(s: TorqueSet, name: str):
     X = getattr(s, name)
-    return _product(s, ("lp", name), lambda: s.lp(X.reshape(X.shape[0], -1)).reshape(X.shape))
+    if name == "Y" and s.y_filtered:
+        return X
+    out = _product(s, ("lp", name), lambda: s.lp(X.reshape(X.shape[0], -1)).reshape(X.shape))
+    if name == "Y" and s.cutoff is not None:
+        # the unfiltered regressor serves nothing once its filtered copy exists (every fit and the
+        # floor's black box read that one): (N, n, 10 n) at 5 kHz is 90 MB a 6-joint record
+        s.Y, s.y_filtered = out, True
+    return out
 
 
 def weighted_inertia_columns(s: TorqueSet):
@@ -519,7 +552,18 @@ def fit_with(base_terms, base_delay, new, sets, inertia=None) -> TorqueFit:
     """Refit with the term ``new`` added (its kind searches its hyper-parameter, if any)."""
     if new is None:
         return fit_terms(base_terms, base_delay, sets, inertia)
-    return new.search(base_terms, base_delay, sets, inertia)
+    had = [set(s.cache) for s in sets]
+    fit = new.search(base_terms, base_delay, sets, inertia)
+    # the filtered columns of the hyper-parameters the search tried and left (a play's grid of
+    # widths, each (N, n, 5) at 5 kHz) are dropped; their products with the other terms stay, and a
+    # later search that tries them again makes them again, the same
+    kept = set(fit.terms)
+    for s, before in zip(sets, had):
+        if s.cutoff is not None:
+            for k in set(s.cache) - before:
+                if isinstance(k, tuple) and k[0] == "cols" and k[1] not in kept:
+                    del s.cache[k]
+    return fit
 
 
 def term_parameters(fit: TorqueFit, joint_names) -> dict:
