@@ -194,7 +194,13 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
         qf, qdf = zero_phase_lowpass(qr, h, fc), zero_phase_lowpass(qdr, h, fc)
         return qf, qdf, np.gradient(qdf, h, axis=0)
 
-    sig_qd = angle_noise(rows["qd"]) if velocity_only else None
+    sig_qd = None
+    if velocity_only:
+        # the velocities' noise where the filter lets it through: a differenced encoder's is blue
+        # (its total, the grid step of the differences, is mostly far above the cutoff), and a
+        # white redraw at its total level made a periodic floor 3.6 x the gap of a null log
+        lvl = band_noise_psd(rows["qd"], h, NOISE_BAND[0] * f_b, NOISE_BAND[1] * f_b)[0]
+        sig_qd = np.minimum(angle_noise(rows["qd"]), np.sqrt(lvl / (2.0 * h)))
     lag = velocity_lag(q_raw, rows["qd"], h, fc) if velocity_only else 0.0
     if abs(lag) > VELOCITY_LAG_MIN * h:
         # velocities logged late (a backward difference of the encoder: half a sample) against the
