@@ -442,6 +442,10 @@ def black_box_noise(s, resid, m, seed: int = 0):
     # the smooth features kept it as noise (a 3-joint arm's play: floor 32.3 % against a 31.8 % gap)
     history_at = len(errs)
     errs.append(per_channel_errors(lambda j: _history_terms(s, j)))
+    if hasattr(s, "cache"):
+        # kept for the channels of this call only: 70 MB on a 5 kHz 6-joint record, read by nothing
+        # else (a second floor of the same set makes them again, the same)
+        s.cache.pop("history_terms", None)
     rms = np.stack([np.sqrt(np.mean(e**2, axis=0)) for e in errs])
     for k in (rigid_at, history_at):  # channels left out of the gap hold no per-channel model's error
         if k >= 0:
