@@ -350,32 +350,31 @@ def _product(s: TorqueSet, key, make):
 
 def term_columns(term: "TorqueTerm", s: TorqueSet) -> np.ndarray:
     """(N, n, k) columns of ``term`` on ``s``, through the set's parallel filter (cached). On a
-    filtered set, what the term's ``columns`` put into the cache and is no larger than its filtered
-    columns (its own unfiltered copy) is dropped once they are made; a larger block several terms
-    share (a family's columns at every joint) stays."""
+    filtered set, the per-sample arrays the term's ``columns`` put into the cache (its unfiltered
+    copy, or a block several terms share: a family's columns at every joint) are dropped once its
+    columns are filtered; a later term that needs one makes it again."""
     key = ("cols", term)
     if key not in s.cache:
         made = set(s.cache)
         cols = s.lp(term.columns(s))
         if s.cutoff is not None:
             # every fit reads only the filtered columns: the unfiltered copies of the tried terms (a
-            # play's grid of widths, each a rigid-torque change at every joint) held 0.4 GB of a
-            # 5 kHz 6-joint log's 2.6 GB, besides their filtered twins. One dropped that a later
-            # term needs is made again, by the same deterministic computation
+            # play's grid of widths, each a rigid-torque change at every joint; the families'
+            # blocks) held 0.6 GB of a 5 kHz 6-joint log's 2.6 GB, besides their filtered twins.
+            # Made again, they are the same: the computation is deterministic
             for k in set(s.cache) - made:
-                own = _nbytes(s.cache[k], len(s.t)) <= cols.nbytes
-                if own and not (isinstance(k, tuple) and k[0] in ("cols", "lp")):
+                kept = isinstance(k, tuple) and k[0] in ("cols", "lp")  # filtered columns
+                if not kept and _per_sample(s.cache[k], len(s.t)):
                     del s.cache[k]
         s.cache[key] = cols
     return s.cache[key]
 
 
-def _nbytes(v, rows: int) -> int:
-    """Bytes of the per-sample arrays (``rows`` long) in a cache entry (an array or a tuple holding
-    some); an entry without any (a product's few numbers) counts as infinitely large: it is kept."""
+def _per_sample(v, rows: int) -> bool:
+    """Whether a cache entry (an array or a tuple holding some) holds an array ``rows`` long (one
+    per sample), not only a product's few numbers."""
     parts = v if isinstance(v, tuple) else (v,)
-    per_sample = [x for x in parts if isinstance(x, np.ndarray) and x.ndim and x.shape[0] == rows]
-    return sum(x.nbytes for x in parts if isinstance(x, np.ndarray)) if per_sample else np.iinfo(np.int64).max
+    return any(isinstance(x, np.ndarray) and x.ndim and x.shape[0] == rows for x in parts)
 
 
 def _filtered(s: TorqueSet, name: str):
