@@ -116,3 +116,19 @@ def test_a_fine_encoder_whose_readings_repeat_gets_a_cutoff_near_the_motion():
     assert np.all(angle_noise(qg) >= 0.97 * step / np.sqrt(12)), angle_noise(qg)
     fc, info = choose_cutoff(qg, 1 / fs)
     assert info["method"] == "motion_band" and 3.0 < fc / 2.5 <= 3 * 3.0, info
+
+
+def test_five_significant_digits_after_a_rest_are_no_splice():
+    """A log that keeps 5 significant digits of a motor angle near 100 rad (a count of 0.01 rad
+    there, 1e-4 near 1 rad) rests, then moves: its first count after the rest is no splice."""
+    from jflex.data._condition import angle_jumps
+
+    t = np.arange(20000) / 5000.0
+    move = np.where(t < 1.0, 0.0, 0.3 * (1 - np.cos(2 * np.pi * 0.5 * (t - 1.0))))
+    q = np.stack([100.48 + move, 1.2 + 0.1 * move], axis=1)
+    q5 = np.array([[float(f"{v:.5g}") for v in row] for row in q])
+    angle_jumps(t, q5, "log")  # no DataError
+    spliced = q5.copy()
+    spliced[12000:, 1] += 1.27
+    with pytest.raises(jflex.JFlexError, match="jumps in one sample"):
+        angle_jumps(t, spliced, "log")

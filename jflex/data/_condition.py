@@ -19,6 +19,7 @@ STALE_RUN = 3  # rows equal to the previous one in every channel, in runs up to 
 # (removed and interpolated); a longer run is a robot at rest logged without noise, kept as it is
 JUMP = 50.0  # an angle step over 50 x every step near it is a splice, not motion
 JUMP_WINDOW = 5  # samples each side a step is compared with
+JUMP_QUANTILE = 0.99  # the moving steps' quantile a splice also stands JUMP x above
 
 DEAD_ZEROS = 0.5  # a channel reading exactly 0 in half of its samples or more is off
 STUCK_RUN = 0.25  # ... holding one value for a quarter of the record in one run is stuck
@@ -329,8 +330,8 @@ def channel_quality(x, fellow_std: float | None = None, moving=None) -> dict:
 
 def angle_jumps(t, q, where: str, names=None) -> None:
     """Refuse angles ``q`` (N, m) at stamps ``t`` that jump in one sample: a step over ``JUMP`` x
-    every other step within ``JUMP_WINDOW`` samples of it (and over ``JUMP`` x the column's smallest
-    nonzero step, an encoder's count); ``names`` (m,) the columns' joints. A log spliced from two runs, or an angle that wraps, puts
+    every other step within ``JUMP_WINDOW`` samples of it and over ``JUMP`` x the column's ordinary
+    moving step (the ``JUMP_QUANTILE`` of its nonzero steps); ``names`` (m,) the columns' joints. A log spliced from two runs, or an angle that wraps, puts
     an impulse into every derivative the diagnosis takes there; motion, however fast, changes its
     step gradually. The error names each such sample and its time."""
     q = np.asarray(q, float).reshape(t.size, -1)
@@ -347,7 +348,12 @@ def angle_jumps(t, q, where: str, names=None) -> None:
         W = JUMP_WINDOW
         pad = np.lib.stride_tricks.sliding_window_view(np.r_[np.zeros(W), dj, np.zeros(W)], 2 * W + 1)
         near = np.maximum(pad[:, :W].max(axis=1), pad[:, W + 1:].max(axis=1))
-        for k in np.flatnonzero((dj > JUMP * near) & (dj > JUMP * float(nz.min()))):
+        # and over JUMP x the column's ordinary moving step (its JUMP_QUANTILE): against the smallest
+        # step (an encoder's count), a log that keeps 5 significant digits (FIGAROH's TX40: a
+        # count of 9.5e-5 rad near zero, 2.1e-4 rad at 100 rad) read the first count after each
+        # rest as a splice and was refused whole
+        typical = float(np.quantile(nz, JUMP_QUANTILE))
+        for k in np.flatnonzero((dj > JUMP * near) & (dj > JUMP * typical)):
             found.append((int(k) + 1, j, float(q[k + 1, j] - q[k, j]), float(near[k])))
     if found:
         found.sort()

@@ -171,6 +171,9 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     q_raw, tau_raw = rows["q"], rows["tau"]
     h = float(np.mean(np.diff(t)))
     sig_q = angle_noise(q_raw)
+    # the angle noise redrawn through the processing (the floor's processing term): read off the
+    # motion (a fast smooth motion's second difference is no noise)
+    sig_draw = angle_noise(q_raw, motion_free=True)
     f_m = motion_band(q_raw, h, sig_q)
     nyq = 0.5 / (h * decimate)
     if cutoff_hz in (None, "auto"):
@@ -222,7 +225,7 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     F, Y = on_rows(_rigid_batch, (robot,), (q, qd, qdd))
     dev = []
     for _ in range(NOISE_DRAWS):
-        qk, qdk, qddk = derive(q_raw + sig_q * rng.standard_normal(q_raw.shape),
+        qk, qdk, qddk = derive(q_raw + sig_draw * rng.standard_normal(q_raw.shape),
                                None if sig_qd is None else rows["qd"] + sig_qd * rng.standard_normal(q_raw.shape))
         dev.append(on_rows(_id_batch, (robot,), (qk, qdk, qddk)) - F)
     var_q = np.mean([d.var(axis=0) for d in dev], axis=0)

@@ -81,17 +81,25 @@ def _repeats(q) -> np.ndarray:
     return out
 
 
-def angle_noise(q):
+def angle_noise(q, *, motion_free: bool = False):
     """Noise std [rad] per column of sampled angles ``q`` (N, n): the larger of the white-noise
     estimate from the robust spread of the second difference, ``MAD(d2 q) / sqrt(6)``, and the
     quantisation noise ``step / sqrt(12)`` of an encoder whose readings sit on a grid (the second
     difference of a slowly moving quantised angle is mostly zero, so its MAD alone reads ~0, or one
     count where about half of it is not: the rounding alone, then, whose noise is ``step / sqrt(12)``). The
     step is the smallest nonzero increment when every increment is (near) a whole number of it, or
-    when the readings repeat (``REPEATS``: a grid the log's rounding or resampling has blurred)."""
+    when the readings repeat (``REPEATS``: a grid the log's rounding or resampling has blurred).
+    ``motion_free``: off a grid, the smaller of that and the fourth difference's estimate
+    (``MAD(d4 q) / sqrt(70)``), which a smooth motion sampled fast barely enters."""
     q = np.asarray(q, dtype=float)
     d2 = q[2:] - 2 * q[1:-1] + q[:-2]
     mad = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
+    if motion_free and len(q) > 8:
+        # the second difference of a fast smooth motion holds the motion itself (qdd h^2: 2-3e-5 rad
+        # at 1 kHz, an encoder's step); the fourth difference's is h^2 smaller, white noise's the
+        # same in its own units (70 sigma^2): the smaller of the two is the noise
+        d4 = d2[2:] - 2 * d2[1:-1] + d2[:-2]
+        mad = np.minimum(mad, 1.4826 * np.median(np.abs(d4 - np.median(d4, axis=0)), axis=0) / np.sqrt(70))
     out = np.empty(q.shape[1])
     rep = _repeats(q)
     for j in range(q.shape[1]):
