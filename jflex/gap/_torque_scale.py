@@ -107,11 +107,12 @@ def _not_a_payload(pb, state, suspects: list[dict]) -> list[dict]:
     which a gain matches as well; fitted as a rigid body (:func:`._torque_terms.nearest_rigid_body`)
     it matches every joint at once, which no scale error of one channel does. A suspect joint whose
     misfit the payload leaves at most where the gain leaves it is no scale error."""
-    if not suspects or state.tfit is None:
-        return suspects
+    if not suspects or state.tfit is None or any(getattr(s, "robot", None) is None for s in pb.ttrain):
+        return suspects  # (sets without their robot: no payload's columns to fit)
     from ._torque_terms import make_term
 
-    fit = T.fit_with(state.tfit.terms, state.tfit.delay, make_term("payload", None), pb.ttrain, pb.inertia)
+    fit = T.fit_with(state.tfit.terms, state.tfit.delay, make_term("payload", None), pb.ttrain,
+                     getattr(pb, "inertia", None))
     pred = {s.name: T.predict(fit, s) for s in pb.ttrain}
     out = []
     for d in suspects:
