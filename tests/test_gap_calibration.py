@@ -110,12 +110,12 @@ def test_nearest_rigid_body_is_a_body_and_locally_nearest():
 
     # no body in a neighbourhood of it is nearer (bodies drawn by perturbing its pseudo-inertia's
     # Cholesky factor, which covers every body)
-    from jflex.gap._torque_terms import _from_pseudo_inertia, _pseudo_inertia
+    from jflex.identify._physical import pseudo_inertia, pseudo_inertia_to_params
 
-    L = np.linalg.cholesky(_pseudo_inertia(p) + 1e-12 * np.eye(4))
+    L = np.linalg.cholesky(pseudo_inertia(p) + 1e-12 * np.eye(4))
     for _ in range(300):
         Lk = L + 1e-3 * np.tril(rng.standard_normal((4, 4))) * np.abs(L).max()
-        q = _from_pseudo_inertia(Lk @ Lk.T)
+        q = pseudo_inertia_to_params(Lk @ Lk.T, np)
         assert cost(q) >= cost(p) - 1e-9 * max(cost(p), 1e-12)
     # a body is left as it is
     assert nearest_rigid_body is not None and payload_implausible(_sphere(1.0, [0, 0, 0.1], 0.05)) is None

@@ -489,16 +489,15 @@ def _cad_beyond_tolerance(pb: Problem, nom: State, floor, upper, factor, cfloor,
         return None
     if not np.any(np.abs(np.abs(nom.tfit.delta) - prior.reach * prior.scale) <= 1e-6 * prior.scale):
         return None
-    saved = (pb.inertia, pb.inertia_gain, dataclasses.replace(prior))
+    # (nominal_state updates the copy's noise level, or drops it when the refit does not pay:
+    # the problem's own prior is put back untouched)
+    saved = (pb.inertia, pb.inertia_gain)
     pb.inertia = dataclasses.replace(prior, reach=CAD_WIDE_REACH)
     try:
         st = pb.nominal_state()
-        wide = pb.inertia
-        ev = pb.evaluate(st) if wide is not None else None
+        ev = pb.evaluate(st) if pb.inertia is not None else None
     finally:
-        pb.inertia, pb.inertia_gain = saved[0], saved[1]
-        for f in dataclasses.fields(saved[2]):
-            setattr(pb.inertia, f.name, getattr(saved[2], f.name))
+        pb.inertia, pb.inertia_gain = saved
     if ev is None or is_significant(ev, floor, upper, factor) or joints_beyond_floor(ev, cfloor, cfactor):
         return None
     from ._inertia import PARAM_NAMES, PARAM_UNITS

@@ -24,6 +24,7 @@ import numpy as np
 from .._dynamics import _rnea
 from .._program_cache import persistent_jit
 from .._sweep import flagged_vmap
+from ..identify._physical import pseudo_inertia, pseudo_inertia_to_params
 from ..identify._signal import motion_band, zero_phase_lowpass
 from ..effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
 from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
@@ -86,36 +87,17 @@ def payload_implausible(theta) -> str | None:
     if not m > 0:
         return (f"a payload of mass {m:.4g} kg with first moment {np.round(h, 4).tolist()} kg m is no rigid body "
                 "(a body carried has a positive mass)")
-    J = _pseudo_inertia(p)
-    I = np.trace(J[:3, :3]) * np.eye(3) - J[:3, :3]
-    lam = np.linalg.eigvalsh(J)
+    lam = np.linalg.eigvalsh(pseudo_inertia(p))
     if lam[0] < -PSEUDO_INERTIA_TOL * max(abs(lam[-1]), 1e-300):
-        return (f"a payload of {m:.4g} kg whose inertia [Ixx, Iyy, Izz] = {np.round(np.diag(I), 5).tolist()} kg m^2 about "
+        return (f"a payload of {m:.4g} kg whose inertia [Ixx, Iyy, Izz] = {np.round(p[[4, 6, 9]], 5).tolist()} kg m^2 about "
                 f"the tool body's origin and first moment {np.round(h, 4).tolist()} kg m no rigid body has (its pseudo-"
                 f"inertia matrix has the negative eigenvalue {lam[0]:.3g})")
     return None
 
 
-def _pseudo_inertia(p) -> np.ndarray:
-    """The 4 x 4 pseudo-inertia ``[[tr(I)/2 1 - I, m c], [m c^T, m]]`` of inertial parameters ``p``
-    (Pinocchio's order, inertia about the body's origin)."""
-    I = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
-    J = np.zeros((4, 4))
-    J[:3, :3] = 0.5 * np.trace(I) * np.eye(3) - I
-    J[:3, 3] = J[3, :3] = p[1:4]
-    J[3, 3] = p[0]
-    return J
-
-
-def _from_pseudo_inertia(J) -> np.ndarray:
-    S = J[:3, :3]
-    I = np.trace(S) * np.eye(3) - S
-    return np.array([J[3, 3], *J[:3, 3], I[0, 0], I[0, 1], I[1, 1], I[0, 2], I[1, 2], I[2, 2]])
-
-
 def _body_map() -> np.ndarray:
     """(10, 10): inertial parameters from a pseudo-inertia's Frobenius-normed entries (linear)."""
-    return np.stack([_from_pseudo_inertia(_mat(e)) for e in np.eye(10)], axis=1)
+    return np.stack([pseudo_inertia_to_params(_mat(e), np) for e in np.eye(10)], axis=1)
 
 
 _IU = np.triu_indices(4)
@@ -158,7 +140,7 @@ def nearest_rigid_body(theta, S, *, iterations: int = NEAREST_ITERATIONS, rtol: 
         r = A @ v - theta
         return float(r @ S @ r)
 
-    x = _psd(_vec(_pseudo_inertia(theta)))
+    x = _psd(_vec(pseudo_inertia(theta)))
     y, t, fx = x.copy(), 1.0, cost(x)
     for k in range(iterations):
         xn = _psd(y - 2.0 * (H @ y - g0) / L)

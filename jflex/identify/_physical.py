@@ -31,13 +31,22 @@ def log_cholesky_pseudo_inertia(theta):
     return U @ U.T
 
 
-def pseudo_inertia_to_params(J):
+def pseudo_inertia(pi) -> np.ndarray:
+    """The pseudo-inertia ``J = [[Sigma, h], [h^T, m]]`` (4, 4) of 10 inertial parameters
+    (Pinocchio order), on the host."""
+    pi = np.asarray(pi, dtype=float)
+    I = inertia_matrix3(pi, np)  # on the host: a fit's start and checks run no JAX program
+    S = 0.5 * np.trace(I) * np.eye(3) - I
+    return np.block([[S, pi[1:4, None]], [pi[None, 1:4], np.array([[pi[0]]])]])
+
+
+def pseudo_inertia_to_params(J, xp=jnp):
     """The 10 inertial parameters (Pinocchio order ``[m, m c, I about the origin]``) of a
     pseudo-inertia ``J = [[Sigma, h], [h^T, m]]`` (..., 4, 4); linear in ``J`` (so a frame change
-    ``T J T^T`` of the body is one of its parameters)."""
+    ``T J T^T`` of the body is one of its parameters). ``xp``: the array module (``numpy`` on the host)."""
     S = J[..., :3, :3]
     tr = S[..., 0, 0] + S[..., 1, 1] + S[..., 2, 2]
-    return jnp.stack([J[..., 3, 3], J[..., 0, 3], J[..., 1, 3], J[..., 2, 3], tr - S[..., 0, 0], -S[..., 0, 1],
+    return xp.stack([J[..., 3, 3], J[..., 0, 3], J[..., 1, 3], J[..., 2, 3], tr - S[..., 0, 0], -S[..., 0, 1],
                       tr - S[..., 1, 1], -S[..., 0, 2], -S[..., 1, 2], tr - S[..., 2, 2]], axis=-1)
 
 
@@ -49,12 +58,7 @@ def log_cholesky_to_inertia(theta):
 def inertia_to_log_cholesky(pi, eps: float = 1e-9):
     """Inverse map; a body on (or beyond) the boundary of consistency is first nudged inside by
     adding ``eps`` (relative) to its pseudo-inertia's eigenvalues."""
-    pi = np.asarray(pi, dtype=float)
-    m, h = pi[0], pi[1:4]
-    I = inertia_matrix3(pi, np)  # on the host: a fit's start and checks run no JAX program
-    S = 0.5 * np.trace(I) * np.eye(3) - I
-    J = np.block([[S, h[:, None]], [h[None, :], np.array([[m]])]])
-    w, V = np.linalg.eigh(J)
+    w, V = np.linalg.eigh(pseudo_inertia(pi))
     floor = eps * max(abs(w).max(), 1e-12)
     J = (V * np.maximum(w, floor)) @ V.T
     P = np.eye(4)[::-1]
@@ -69,11 +73,7 @@ def inertia_to_log_cholesky(pi, eps: float = 1e-9):
 
 def is_consistent(pi, tol: float = 1e-9) -> bool:
     """Whether 10 inertial parameters describe a physical body (pseudo-inertia PSD)."""
-    pi = np.asarray(pi, dtype=float)
-    I = inertia_matrix3(pi, np)
-    S = 0.5 * np.trace(I) * np.eye(3) - I
-    J = np.block([[S, pi[1:4, None]], [pi[None, 1:4], np.array([[pi[0]]])]])
-    w = np.linalg.eigvalsh(J)
+    w = np.linalg.eigvalsh(pseudo_inertia(pi))
     return bool(w.min() >= -tol * max(abs(w).max(), 1.0))
 
 
