@@ -257,7 +257,7 @@ def run_gap_demo(cfg: dict, run_dir: pathlib.Path) -> dict:
         name = load_yaml(rfile).get("name", rfile.stem) if rfile.suffix in (".yaml", ".yml") else rfile.stem
         case_robot = (name, load_case(case_dir).robot)
     rigid = run_demo(cfg, rigid_dir, case_robot)
-    from .gap._report import add_figures
+    from .gap.report._report import add_figures
 
     add_figures(run_dir, [(f"rigid_maps/{p}", cap) for p, cap in zip(rigid["plots"], (
         "Gravity torques of joints 2 and 3 and the mass matrix's conditioning (log10) over the (q2, q3) grid.",

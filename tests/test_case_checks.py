@@ -14,7 +14,7 @@ import yaml
 
 import jflex
 from jflex.gap import load_case
-from jflex.gap._html import data_notes
+from jflex.gap.report._html import data_notes
 from test_case_schema import write_case
 
 

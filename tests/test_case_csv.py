@@ -264,14 +264,14 @@ def test_case_init_guesses_the_column_map(tmp_path):
     (out / "case.yaml").write_text(yaml.safe_dump(cfg))
     assert len(load_case(out).datasets) == 2
     # a second init does not overwrite it
-    from jflex.gap._case_init import case_init
+    from jflex.gap.case._init import case_init
 
     with pytest.raises(jflex.ConfigError, match="exists already"):
         case_init(logs / "robot.yaml", logs / "run1.csv", out)
 
 
 def test_case_init_leaves_todo_where_it_cannot_guess(tmp_path):
-    from jflex.gap._case_init import case_init
+    from jflex.gap.case._init import case_init
 
     G.write_robot(tmp_path, "planar2")
     (tmp_path / "log.csv").write_text("stamp,a1,a2,motor_i_1\n0,0,0,0\n0.01,0,0,0\n")

@@ -14,7 +14,7 @@ import yaml
 
 import jflex
 from jflex.gap import load_case
-from jflex.gap._case_init import case_init
+from jflex.gap.case._init import case_init
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
 from independent import robots as R  # noqa: E402

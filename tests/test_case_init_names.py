@@ -7,7 +7,7 @@ from jflex_family import generate as G
 
 
 def test_bare_joint_names_are_the_angle_columns(tmp_path):
-    from jflex.gap._case_init import case_init
+    from jflex.gap.case._init import case_init
 
     G.write_robot(tmp_path, "planar2")  # joints shoulder, elbow
     (tmp_path / "log.csv").write_text("time,Shoulder,ELBOW,shoulder_vel,elbow_vel,current_1,current_2\n"

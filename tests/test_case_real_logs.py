@@ -47,7 +47,7 @@ def test_case_reduces_the_robot_as_pinocchio_does(tmp_path, via):
     (tmp_path / "case.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     case = load_case(tmp_path)
     assert case.robot.joint_names == ("joint1", "joint2")
-    from jflex.gap._report import robot_name
+    from jflex.gap.report._report import robot_name
 
     assert robot_name(case) == "arm3"  # the report title names the robot (the URDF name or the YAML stem)
     # the reduced model's inverse dynamics equal Pinocchio's, joint3 locked at -0.4 rad
@@ -100,11 +100,11 @@ def test_case_init_copies_the_urdf_a_robot_yaml_names_and_merges_logs(tmp_path):
 
 def test_one_uff58_reader():
     import jflex.data
-    import jflex.gap._uff
+    import jflex.data._uff
     import jflex.identify
 
     assert jflex.identify.read_uff58 is jflex.data.read_uff58
-    assert jflex.gap._uff.uff_arrays is jflex.data.uff_arrays
+    assert jflex.data._uff.uff_arrays is jflex.data.uff_arrays
 
 
 def test_one_log_held_out_by_time_window(tmp_path):

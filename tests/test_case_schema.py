@@ -16,7 +16,7 @@ import yaml
 
 import jflex
 from jflex.gap import load_case
-from jflex.gap._schema import schema_table
+from jflex.gap.case._schema import schema_table
 
 DOC = pathlib.Path(__file__).resolve().parent.parent / "docs" / "case_format.md"
 
@@ -223,7 +223,7 @@ def test_doc_table_is_the_schema():
     text = DOC.read_text()
     m = re.search(r"<!-- schema-table -->\n(.*?)\n<!-- /schema-table -->", text, re.S)
     assert m, "docs/case_format.md lacks the <!-- schema-table --> block"
-    assert m.group(1).strip() == schema_table().strip(), "regenerate: python -m jflex.gap._schema"
+    assert m.group(1).strip() == schema_table().strip(), "regenerate: python -m jflex.gap.case._schema"
 
 
 # --- experiment configs: the same hook ------------------------------------------------------------

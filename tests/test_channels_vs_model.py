@@ -16,7 +16,7 @@ import yaml
 
 from jflex.gap import load_case
 from jflex.gap._problem import Problem
-from jflex.gap._torque_scale import torque_scale_suspects
+from jflex.gap.torque._scale import torque_scale_suspects
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
 from independent import robots as R  # noqa: E402

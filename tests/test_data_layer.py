@@ -135,7 +135,7 @@ def test_records_at_250_hz_and_1_khz_each_get_their_own_cutoff(tmp_path, noise):
             cols[f"q_{j}"] = cols[f"q_{j}"] + noise * rng.standard_normal(t.size)
         _write_csv(tmp_path / f"{name}.csv", t, cols)
     case = load_case(_case(tmp_path, [_torque_entry("slow.csv", "train"), _torque_entry("fast.csv", "validation")]))
-    from jflex.gap._torque import torque_set
+    from jflex.gap.torque._set import torque_set
 
     cut = {}
     for d in case.datasets:
@@ -179,7 +179,7 @@ def test_velocities_without_accelerations_are_filtered_before_differentiation(tm
     case = load_case(_case(tmp_path, [train, _torque_entry("log.csv", "validation", name="v")]))
     d = case.datasets[0]
     assert d.conditioning["derivatives"] == "velocity"
-    from jflex.gap._torque import torque_set
+    from jflex.gap.torque._set import torque_set
 
     s = torque_set(case.robot, d)
     true = traj(s.t, 2)
@@ -381,8 +381,8 @@ def test_given_cutoff_reads_the_torque_noise_below_it(tmp_path, monkeypatch):
     # read off it runs up to Nyquist (2.5 kHz on a real 5 kHz log), and the torque-noise band (1.5-4
     # x it) lay above Nyquist, reading 0 N m under a given 100 Hz cutoff; the band now follows the
     # given cutoff when the motion band does not lie below it
-    import jflex.gap._torque as T
-    from jflex.gap._torque import torque_set
+    import jflex.gap.torque._set as T
+    from jflex.gap.torque._set import torque_set
 
     monkeypatch.setattr(T, "motion_band", lambda q, h, sig: 0.48 / h)  # the estimator's failure
 

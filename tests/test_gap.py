@@ -16,9 +16,9 @@ import yaml
 
 import jflex
 from jflex_family import generate as G
-from jflex.gap import _frequency_model as L
-from jflex.gap import _torque as T
-from jflex.gap import _torque_terms as TT
+from jflex.gap.frequency import _model as L
+from jflex.gap.torque import _set as T
+from jflex.gap.torque import _terms as TT
 from jflex.gap._effect_term import SMOOTHING, STRIBECK_VS
 from jflex.gap import diagnose, load_case
 
@@ -302,8 +302,8 @@ def test_payload_candidate_recovers_mass_and_centre_of_mass(tmp_path):
     residual 37x smaller)."""
     import types
 
-    from jflex.gap._case import Dataset
-    from jflex.gap._frequency_kinds import ToolPayload
+    from jflex.gap.case._case import Dataset
+    from jflex.gap.frequency._kinds import ToolPayload
 
     robot = G.load_robot(G.write_robot(tmp_path, "arm3"))
     sites = [L.Site("joint", j) for j in range(3)]
@@ -328,7 +328,7 @@ def test_payload_candidate_recovers_mass_and_centre_of_mass(tmp_path):
     assert pp["mass [kg]"] == pytest.approx(m, rel=0.03), pp
     assert np.linalg.norm(np.asarray(pp["com (tool frame) [m]"]) - com) < 0.01, pp
     # and the report says so (not "a point mass at the tool frame's origin")
-    from jflex.gap._html import payload_summary
+    from jflex.gap.report._html import payload_summary
 
     ps = payload_summary({"linear": {"payload": pp}}, robot, "tool")
     assert ps["com_m"] == pp["com (tool frame) [m]"] and "centre of mass" in ps["side"]
@@ -365,9 +365,9 @@ def test_a_damping_law_defined_outside_gap_is_a_frequency_candidate():
     assert law_candidates()["ring_damping"] is Ring
     # its kind: tried at the nominally flexible joints only, one parameter (no exponent), and a
     # case may name it
-    from jflex.gap._frequency_kinds import frequency_kinds
+    from jflex.gap.frequency._kinds import frequency_kinds
     from jflex.gap._problem import Candidate
-    from jflex.gap._signatures import n_params
+    from jflex.gap.judge._signatures import n_params
 
     kind = frequency_kinds()["ring_damping"]
     assert kind.law is Ring and kind.per_joint

@@ -12,10 +12,10 @@ import pytest
 import jflex
 from jflex import DataError
 from jflex.gap import verdict
-from jflex.gap._degenerate import frf_set, torque_channels
-from jflex.gap._noise import noise_floor
+from jflex.gap.judge._degenerate import frf_set, torque_channels
+from jflex.gap.judge._noise import noise_floor
 from jflex.gap._problem import Problem
-from jflex.gap._where import where
+from jflex.gap.judge._where import where
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
 from independent import make_case  # noqa: E402
@@ -63,7 +63,7 @@ def test_a_dead_channel_is_left_out_and_named(case):
     assert set(pb.excluded) == {v} and names[2] in pb.excluded[v] and "constant" in pb.excluded[v][names[2]]
     # the gap and the "where" table ignore it
     from jflex.gap._problem import State
-    import jflex.gap._torque as T
+    import jflex.gap.torque._set as T
 
     st = State(T.fit_terms((), 0.0, pb.ttrain), None, None)
     ev = pb.evaluate(st)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from jflex.gap import MIN_NAMED_SHRINK, find_period, forward_select, worse_channels
-from jflex.gap._noise import black_box_noise, periodic_noise
+from jflex.gap.judge._noise import black_box_noise, periodic_noise
 from jflex.gap._problem import pooled_gap
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))

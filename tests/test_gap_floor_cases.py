@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jflex
-from jflex.gap._noise import noise_floor
+from jflex.gap.judge._noise import noise_floor
 from jflex.gap._problem import Problem
 from jflex.identify._signal import zero_phase_lowpass
 

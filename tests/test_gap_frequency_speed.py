@@ -1,4 +1,4 @@
-"""The fast paths of the diagnosis's frequency evaluator (:mod:`jflex.gap._frequency_model`) give the
+"""The fast paths of the diagnosis's frequency evaluator (:mod:`jflex.gap.frequency._model`) give the
 numbers of the plain formulas bit for bit, and its memos never hand back another ``x``'s or
 posture's values (a diagnosis's selection moved on a 1e-15 change of the modal estimates)."""
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import jflex
-from jflex.gap import _frequency_model as L
-from jflex.gap._frequency_inertia import shifted
+from jflex.gap.frequency import _model as L
+from jflex.gap.frequency._inertia import shifted
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from scipy.signal import butter, sosfiltfilt
 
 import jflex
 from jflex.gap._inertia import PARAM_NAMES, link_moves
-from jflex.gap._noise import noise_floor, periodic_noise
+from jflex.gap.judge._noise import noise_floor, periodic_noise
 from jflex.gap._problem import Problem
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-import jflex.gap._torque as T
+import jflex.gap.torque._set as T
 
 
 @dataclasses.dataclass(frozen=True)

@@ -12,8 +12,8 @@ import pytest
 import jflex
 from jflex import effects as E
 from jflex.effects import _linear as EL
-from jflex.gap import _torque as T
-from jflex.gap import _torque_terms as TT
+from jflex.gap.torque import _set as T
+from jflex.gap.torque import _terms as TT
 
 pytest.importorskip("pinocchio")
 import _real_effects_cases as G  # noqa: E402
@@ -167,7 +167,7 @@ def test_a_torque_the_log_leaves_out_is_told_from_a_scale_only_where_the_data_ca
     # alone (a torso whose drive reads only what its counterbalance leaves): a gain near 0 and an
     # offset of -150 N m both match, and the reason names both. Joint a's log is the model's x 10
     # (a gear ratio forgotten): a gain, and no offset matches.
-    from jflex.gap._torque_scale import scale_reason, torque_scale_suspects
+    from jflex.gap.torque._scale import scale_reason, torque_scale_suspects
     import types
 
     t = np.linspace(0, 10, 2001)

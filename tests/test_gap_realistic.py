@@ -98,7 +98,7 @@ def _make_case(folder: pathlib.Path, seed: int, extra_torque=None, angles_only=T
 def test_nominal_identification_recovers_planted_cad_error(tmp_path):
     folder, model = _make_case(tmp_path / "cad", seed=3, angles_only=False)
     from jflex.gap._problem import Problem
-    from jflex.gap._case import load_case
+    from jflex.gap.case._case import load_case
 
     case = load_case(folder)
     pb = Problem(case)
@@ -222,8 +222,8 @@ def test_modal_null_case_within_the_cad_tolerance_raises_no_alarm(tmp_path):
     from independent import make_case
 
     from jflex.gap import load_case
-    from jflex.gap._frequency_inertia import _Shifted, cad_spread
-    from jflex.gap import _frequency_model as L
+    from jflex.gap.frequency._inertia import _Shifted, cad_spread
+    from jflex.gap.frequency import _model as L
     from jflex.gap._problem import Problem
 
     folder, _ = make_case(tmp_path / "modal_null", kind="modal", robot="arm3", effects=(), seed=8000 + 17 * 35)

@@ -87,7 +87,8 @@ def test_payload_line_gives_mass_in_kg_and_com_in_tool_frame(page):
 
 def _rewritten(run, **changes):
     """The demo's diagnosis.json with ``changes``, rendered again as report.md and report.html."""
-    from jflex.gap import _html, _report
+    from jflex.gap.report import _html
+    from jflex.gap.report import _report
 
     r = json.loads((run / "diagnosis.json").read_text())
     r.update(changes)
@@ -123,7 +124,7 @@ def test_tolerance_bound_names_the_parameter(run):
 
 
 def test_a_non_physical_payload_is_said_so():
-    from jflex.gap._html import payload_line, payload_summary
+    from jflex.gap.report._html import payload_line, payload_summary
 
     class Robot:
         nq, link_names = 2, ("a", "b")

@@ -15,9 +15,9 @@ import yaml
 
 import jflex
 from jflex_family import generate as G
-from jflex.gap import _response as R
-from jflex.gap import _torque as T
-from jflex.gap import _torque_terms as TT
+from jflex.gap.response import _response as R
+from jflex.gap.torque import _set as T
+from jflex.gap.torque import _terms as TT
 from jflex.gap._effect_term import STRIBECK_VS
 from jflex.gap import diagnose, load_case
 
@@ -140,7 +140,7 @@ def test_joint_flexibility_seen_at_the_tip_is_found(tmp_path):
     # springs fitted on FRF training data (motors held) are simulated in the tip set: the applied
     # torque drives the motor side (the stated rotor inertia), the spring the link. The nominal
     # model lacks the spring at one joint; the tip record is the only validation set.
-    from jflex.gap._report import write_report
+    from jflex.gap.report._report import write_report
 
     folder = G.frf_case(tmp_path / "flex", "arm3", ["joint_flexibility"], seed=3, n_post=2, tip_noise=TIP_NOISE,
                         frf_validation=False)
@@ -162,7 +162,7 @@ def test_joint_flexibility_seen_at_the_tip_is_found(tmp_path):
 def test_failed_solves_are_recorded(tmp_path):
     # torques a thousand times too large from mid-record: the simulation runs away; its samples
     # beyond the 1000 % cap are counted in diagnosis.json and listed in the report
-    from jflex.gap._report import markdown
+    from jflex.gap.report._report import markdown
 
     folder = G.torque_case(tmp_path / "fail", "planar2", [], seed=1, n_train=1, n_val=1, tip_noise=TIP_NOISE)
     _rewrite(folder, lambda z: z["tau"].__setitem__(slice(len(z["tau"]) // 2, None), z["tau"][len(z["tau"]) // 2:] * 1e3))

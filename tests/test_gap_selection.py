@@ -57,7 +57,7 @@ def test_a_lone_partial_match_to_an_unknown_effect_is_not_named():
 
 
 def test_stop_reason_of_a_failed_probation_names_what_followed():
-    from jflex.gap._selection import stop_reason
+    from jflex.gap.judge._selection import stop_reason
 
     class C(str):
         def label(self, names):
@@ -139,7 +139,7 @@ def test_a_gap_on_a_light_joint_is_named_on_that_joints_evidence():
 
 
 def test_a_joint_beyond_its_floor_under_a_pooled_gap_within_noise():
-    from jflex.gap._selection import joints_beyond_floor
+    from jflex.gap.judge._selection import joints_beyond_floor
 
     # the pooled gap (1.10 %) is within its floor (1.0 %: 1.2 x 1.0 + 0.2 = 1.4), the light joint's
     # 12 % is three times its own 4 % floor
@@ -193,7 +193,7 @@ def test_a_rival_that_closes_what_the_selected_effect_left_takes_its_place(shape
     # part); beside the rotor inertia also selected, the spring closes what the offset leaves (its
     # shape): it takes the offset's place, unless the gain is below MIN_STEP_SHRINK of the excess,
     # or no excess is left to close (both leave none: the selection stands)
-    from jflex.gap._selection import MIN_STEP_SHRINK, swap_rivals
+    from jflex.gap.judge._selection import MIN_STEP_SHRINK, swap_rivals
 
     F = frozenset
     left = {F(): 40.0, F({"offset"}): 13.0, F({"spring"}): 13.5, F({"rotor"}): 30.0,
@@ -223,7 +223,7 @@ def test_a_richer_nested_effect_is_named_when_the_held_out_criterion_says_so(ric
     # the richer one that contains it (rich_gap) both close 100 % of the excess. The simpler one
     # wins unless the richer one's held-out criterion is decisively better (many samples and a
     # clearly lower gap); a near tie or thin evidence keeps the simpler name.
-    from jflex.gap._selection import rank_entries, simpler_holds
+    from jflex.gap.judge._selection import rank_entries, simpler_holds
 
     floor = {"v": 2.0}
     gaps = {(): 4.0, ("simple",): 1.8, ("rich",): rich_gap}
@@ -251,7 +251,7 @@ def test_a_richer_nested_law_takes_the_place_of_the_simpler_beside_the_others(ri
     # beside the sensor delay also selected, the richer law's held-out criterion is decisively
     # better (rich_left 0) and it takes the place, also when the floor (1.5, an upper bound above
     # the noise) leaves no excess to close; barely better (0.9), it does not
-    from jflex.gap._selection import swap_rivals
+    from jflex.gap.judge._selection import swap_rivals
 
     F = frozenset
     left = {F(): 40.0, F({"coulomb"}): 13.0, F({"stribeck"}): 12.9, F({"delay"}): 27.0, F({"coulomb", "stribeck"}): 12.9,

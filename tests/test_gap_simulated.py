@@ -43,7 +43,7 @@ def test_screening_places_the_spring_near_its_stiffness(flexible_tip_case):
     pb = Problem(load_case(folder))
     nom = pb.nominal_state()
     j = pb.names.index(planted["joint"])
-    from jflex.gap import _simulated as S
+    from jflex.gap.response import _simulated as S
 
     costs = {}
     batch = S.K_GRID * len(S.ZETAS)  # the scan's batch: its compiled program serves the check too

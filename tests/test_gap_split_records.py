@@ -17,7 +17,7 @@ import yaml
 
 import jflex
 from jflex.gap import diagnose, load_case
-from jflex.gap._html import conditioning_table, data_notes
+from jflex.gap.report._html import conditioning_table, data_notes
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
 from independent import robots as R  # noqa: E402

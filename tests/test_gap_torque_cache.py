@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.signal import butter, sosfiltfilt
 
-import jflex.gap._torque as T
+import jflex.gap.torque._set as T
 from jflex.identify._signal import BUTTER_ORDER
 
 RATE, CUTOFF = 100.0, 5.0

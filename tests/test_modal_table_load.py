@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import jflex
-from jflex.gap._case import _modal
+from jflex.gap.case._case import _modal
 
 
 @pytest.mark.parametrize("bad", [np.inf, -np.inf, 1.0, -0.01])

@@ -4,7 +4,7 @@ effect parameters in N (per m), not N m (per rad)."""
 
 from __future__ import annotations
 
-from jflex.gap._report import add_figures, markdown, prismatic_units
+from jflex.gap.report._report import add_figures, markdown, prismatic_units
 
 
 def _png(path):

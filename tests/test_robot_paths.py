@@ -33,7 +33,7 @@ def _case(folder: pathlib.Path, urdf_field: str) -> pathlib.Path:
 
 
 def _robot_of(folder, **kw):
-    from jflex.gap._case import _load_robot
+    from jflex.gap.case._case import _load_robot
 
     return _load_robot("robot.yaml", folder, folder / "case.yaml", kw.get("allow_outside", False))
 
@@ -137,7 +137,7 @@ def test_panda_without_example_robot_data_names_the_extra(monkeypatch):
 
 @pytest.mark.parametrize("robot", ["arm\x00.yaml", "r" * 5000, "r" * 5000 + ".urdf"])
 def test_case_robot_field_nul_or_too_long(tmp_path, robot):
-    from jflex.gap._case import _load_robot
+    from jflex.gap.case._case import _load_robot
 
     with pytest.raises(jflex.ConfigError, match="field 'robot'"):
         _load_robot(robot, tmp_path, tmp_path / "case.yaml", False)
@@ -157,7 +157,7 @@ def test_reduced_robot_yaml_urdf_outside_the_case_refused(tmp_path, given):
     # same rule as the plain `robot: robot.yaml`
     from types import SimpleNamespace
 
-    from jflex.gap._case import _load_reduced_robot
+    from jflex.gap.case._case import _load_reduced_robot
 
     outside = tmp_path / "outside.urdf"
     outside.write_text(URDF)

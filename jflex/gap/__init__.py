@@ -1,12 +1,12 @@
 """Sim-to-real gap diagnosis: where the gap lies, which unmodelled effect causes it,
 how far it shrinks once that effect is added and refitted, judged on held-out data."""
 
-from ._case import Case as Case, Dataset as Dataset, EFFECT_NAMES as EFFECT_NAMES, load_case as load_case
-from ._case_init import case_init as case_init
+from .case._case import Case as Case, Dataset as Dataset, EFFECT_NAMES as EFFECT_NAMES, load_case as load_case
+from .case._init import case_init as case_init
 from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose
 from ._effect_term import EffectCandidate as EffectCandidate
-from ._noise import find_period as find_period, noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
-from ._selection import (
+from .judge._noise import find_period as find_period, noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
+from .judge._selection import (
     EXPLAINED_FLOOR_FACTOR as EXPLAINED_FLOOR_FACTOR,
     EXPLAINED_SHRINK as EXPLAINED_SHRINK,
     FAMILY_ALPHA as FAMILY_ALPHA,
@@ -33,5 +33,5 @@ from ._selection import (
     vetoed as vetoed,
     worse_channels as worse_channels,
 )
-from ._report import write_report as write_report
+from .report._report import write_report as write_report
 from ._demo import demo as demo

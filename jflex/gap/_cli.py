@@ -11,9 +11,9 @@ from .._runs import make_run_dir
 
 def _diagnose(args) -> int:
     from .._progress import stages
-    from ._case import load_case
+    from .case._case import load_case
     from ._diagnose import diagnose
-    from ._report import write_report
+    from .report._report import write_report
 
     # the stages on stderr while a person watches (a terminal); nothing in a log. The stage line
     # is closed before an error is printed, so the two never share a line
@@ -39,7 +39,7 @@ def _diagnose(args) -> int:
 
 
 def _case_init(args) -> int:
-    from ._case_init import case_init
+    from .case._init import case_init
 
     try:
         path = case_init(args.robot, args.log, args.out, hold_out=args.hold_out, rate=args.rate)

@@ -8,7 +8,7 @@ import pathlib
 
 from .._progress import stages
 from ._diagnose import diagnose
-from ._report import write_report
+from .report._report import write_report
 
 DATA = pathlib.Path(__file__).resolve().parents[1] / "data"
 

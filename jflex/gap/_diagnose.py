@@ -27,19 +27,19 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ._case import Case, load_case
-from ._frequency_inertia import cad_spread
+from .case._case import Case, load_case
+from .frequency._inertia import cad_spread
 from ._inertia import inertia_prior, link_moves
-from ._response import cad_spread as cad_spread_response
-from ._noise import noise_floor
+from .response._response import cad_spread as cad_spread_response
+from .judge._noise import noise_floor
 from ._problem import CONFOUNDED, Candidate, Problem, State, parameters
-from ._selection import (FAMILY_ALPHA, SIGNIFICANCE, gap_uncertainty, significance_factor, MIN_GAP, MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWAP_SHRINK, forward_select, gap_summary,
+from .judge._selection import (FAMILY_ALPHA, SIGNIFICANCE, gap_uncertainty, significance_factor, MIN_GAP, MIN_NAMED_SHRINK, MIN_STEP_SHRINK, NESTED, SWAP_SHRINK, forward_select, gap_summary,
                          ic_delta, decisive, swap_rivals, is_significant, joints_beyond_floor, pooled_upper, rank_entries, step_record, stop_reason, verdict, vetoed,
                          worse_channels)
-from ._frequency_kinds import frequency_kinds
-from ._signatures import indistinguishable_from_inertia, n_params, signature_name, signatures
-from ._torque_scale import scale_reason, torque_scale_suspects
-from ._where import where
+from .frequency._kinds import frequency_kinds
+from .judge._signatures import indistinguishable_from_inertia, n_params, signature_name, signatures
+from .torque._scale import scale_reason, torque_scale_suspects
+from .judge._where import where
 
 @dataclasses.dataclass
 class Diagnosis:
@@ -104,7 +104,7 @@ def _torque_signature(text: str) -> str:
 def _implausible(problem, cand, state):
     """Why a candidate's fit in ``state`` is implausible (values no machine has), else None
     (:func:`._torque_terms.implausible`, where the torque terms carry plausible ranges)."""
-    from . import _torque_terms as TT
+    from .torque import _terms as TT
 
     f = getattr(TT, "implausible", None)
     if f is None or state is None or not problem.ttrain:

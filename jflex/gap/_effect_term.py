@@ -26,7 +26,7 @@ from .._errors import ParameterError
 from .._sweep import flagged_vmap
 from .._model import Model, _effect_kinetic, _effect_potential, initial_state
 from ..identify._fit import Free, ParameterSpec
-from ._torque import TorqueTerm
+from .torque._set import TorqueTerm
 
 LINEARITY_RTOL = 1e-6  # columns at the start and at twice the start must agree this well
 
@@ -168,7 +168,7 @@ class EffectTerm(TorqueTerm):
         parts.extra += list(m.effects)
 
     def implausible(self, theta, sets):
-        from ._torque_terms import torque_share_implausible  # the generic range: a user's law declares none
+        from .torque._terms import torque_share_implausible  # the generic range: a user's law declares none
 
         return torque_share_implausible(self, theta, sets)
 
@@ -306,7 +306,7 @@ def family_columns(robot, name, hyper, q, qd, qdd) -> np.ndarray:
     fam = family_of(robot, name)
     model = fam.with_hyper(hyper)
     p = fam.spec.physical(fam.spec.pack(model))
-    from ._torque import on_rows
+    from .torque._set import on_rows
 
     return on_rows(_columns, (model, fam.spec, p), (q, qd, qdd))
 

@@ -10,19 +10,19 @@ import dataclasses
 
 import numpy as np
 
-from ._case import Case
+from .case._case import Case
 from ._effect_term import EffectCandidate, EffectTerm
-from ._frequency_kinds import frequency_kinds, law_candidates
-from ._frequency_inertia import refit_linear_inertia, shifted
-from ._noise import fits_to_noise
-from ._simulated import BASINS, polish_spring, scan_play, scan_spring
+from .frequency._kinds import frequency_kinds, law_candidates
+from .frequency._inertia import refit_linear_inertia, shifted
+from .judge._noise import fits_to_noise
+from .response._simulated import BASINS, polish_spring, scan_play, scan_spring
 from ._inertia import inertia_prior
-from . import _degenerate as D
-from . import _frequency_model as L
-from . import _response as R
-from . import _torque as T
-from ._torque_scale import dead_channels
-from ._torque_terms import KINDS, make_term
+from .judge import _degenerate as D
+from .frequency import _model as L
+from .response import _response as R
+from .torque import _set as T
+from .torque._scale import dead_channels
+from .torque._terms import KINDS, make_term
 
 TORQUE_EFFECTS = tuple(KINDS)
 # pairs a single data set cannot always tell apart: reported as ambiguous when close
@@ -260,7 +260,7 @@ class Problem:
         posture no better, or worse). Without held-out frequency data: when it fits every training
         set to noise. The diagnosis then judges it against the candidate effects on CAD
         (:func:`._diagnose.diagnose`)."""
-        from ._selection import MIN_NAMED_SHRINK
+        from .judge._selection import MIN_NAMED_SHRINK
 
         prior = inertia_prior(self.robot, float(self.options["inertia_prior"]))
         delta, x2, gain = refit_linear_inertia(lm, x, self.ftrain, prior)

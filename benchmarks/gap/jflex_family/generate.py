@@ -22,7 +22,7 @@ import yaml
 from jflex._config import load_robot
 from jflex._dynamics import rnea
 from jflex._spatial import params_from_com
-from jflex.gap import _frequency_model as L
+from jflex.gap.frequency import _model as L
 
 # --- robots (written as DH YAML so the case is self-contained) -------------------------------------
 ROBOTS = {

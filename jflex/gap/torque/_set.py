@@ -21,10 +21,10 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.optimize as so
 
-from .._dynamics import rnea
-from .._errors import DataError
-from .._sweep import flagged_vmap
-from ..identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
+from ..._dynamics import rnea
+from ..._errors import DataError
+from ..._sweep import flagged_vmap
+from ...identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
                                 motion_band, velocity_lag, zero_phase_lowpass)
 
 
@@ -149,7 +149,7 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     with a named fallback (:func:`jflex.data.choose_cutoff`); stamps that are not uniform are
     resampled first (:func:`jflex.data.resample_uniform`; :func:`jflex.gap.load_case` has done so
     already for every reader)."""
-    from ..data._condition import choose_cutoff, resample_uniform
+    from ...data._condition import choose_cutoff, resample_uniform
 
     a = ds.arrays
     t, tau_raw = np.asarray(a["t"], float), np.asarray(a["tau"], float)

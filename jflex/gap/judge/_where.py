@@ -8,11 +8,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import _frequency_model as L
+from ..frequency import _model as L
 
 if TYPE_CHECKING:
-    from ._case import Case
-    from ._problem import Problem
+    from ..case._case import Case
+    from .._problem import Problem
 
 def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 8, n_bands: int = 8,
           channel_floor: dict | None = None) -> list:

@@ -1,6 +1,6 @@
 """The schema of ``case.yaml`` (pydantic): every key, its type and range, which keys each effect
 and each data-set format takes. :func:`jflex.gap.load_case` validates with it; what needs the
-robot (joint names, frames) or the data files is checked there. ``python -m jflex.gap._schema``
+robot (joint names, frames) or the data files is checked there. ``python -m jflex.gap.case._schema``
 prints the table of ``docs/case_format.md``."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
-from .._schema import Strict, markdown_table
-from ._frequency_kinds import frequency_kinds
-from ._torque_terms import KINDS as TORQUE_KINDS
+from ..._schema import Strict, markdown_table
+from ..frequency._kinds import frequency_kinds
+from ..torque._terms import KINDS as TORQUE_KINDS
 
 KINDS = ("torque", "frf", "modal", "response")
 SPLITS = ("train", "validation")

@@ -6,10 +6,10 @@ import pathlib
 
 import numpy as np
 
-from .._runs import write_results
+from ..._runs import write_results
 from . import _figures as FG
 from . import _html
-from ._selection import vetoed
+from ..judge._selection import vetoed
 
 
 def robot_name(case) -> str:
@@ -17,7 +17,7 @@ def robot_name(case) -> str:
     robot entry of case.yaml (a config name such as ``panda``, or the file's stem)."""
     import re
 
-    from .._config import load_yaml
+    from ..._config import load_yaml
 
     try:
         spec = load_yaml(case.path)["robot"]
@@ -134,7 +134,7 @@ def _plots(diag, out: pathlib.Path, robot: str, ev0: dict, evf: dict) -> list[di
 def _response_plots(diag, out: pathlib.Path, plt, robot: str) -> list[tuple[str, str, str]]:
     """One figure per output-error (tip) set: measured, nominal and final simulated channels over
     time (left) and both residuals (right), one row per channel."""
-    from . import _response as R
+    from ..response import _response as R
 
     pb = diag.problem
     if not pb.rval:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._errors import DataError
+from ..._errors import DataError
 
 # the measured torque's pooled spread against the nominal (CAD) model's along the same motion:
 # outside this range the record is in other units, scaled wrongly, or has no motion

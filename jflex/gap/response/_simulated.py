@@ -33,12 +33,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._dynamics import crba
-from .._fold import fold_kinematics
-from .._simulate import simulate
-from ..effects import FlexibleJoints
-from ..identify import Free, Log, ParameterSpec, TimeData, fit, levenberg_marquardt
-from .._inputs import Sampled
+from ..._dynamics import crba
+from ..._fold import fold_kinematics
+from ..._simulate import simulate
+from ...effects import FlexibleJoints
+from ...identify import Free, Log, ParameterSpec, TimeData, fit, levenberg_marquardt
+from ..._inputs import Sampled
 from . import _response as R
 
 K_GRID = 17  # stiffnesses scanned (log-spaced) before the local fit

@@ -13,10 +13,10 @@ import shutil
 import numpy as np
 import yaml
 
-from .._config import load_robot
-from .._errors import ConfigError
-from .._runs import load_yaml
-from ._csv import Table
+from ..._config import load_robot
+from ..._errors import ConfigError
+from ..._runs import load_yaml
+from ...data._csv import Table
 
 TIME_WORDS = ("time", "t", "timestamp", "stamp", "sec", "secs")
 # role -> header words that name it (a word is a maximal run of letters)

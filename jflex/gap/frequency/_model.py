@@ -43,12 +43,12 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.optimize as so
 
-from .._dynamics import crba, jacobian
-from .._model import Model, gravity_stiffness
-from .._robot import make_robot
-from .._spatial import inertia_matrix3, params_to_com, skew
-from ..identify._physical import log_cholesky_pseudo_inertia, pseudo_inertia_to_params
-from ..effects import KelvinVoigt, Payload, Spring, StructuralDamping, complex_modulus
+from ..._dynamics import crba, jacobian
+from ..._model import Model, gravity_stiffness
+from ..._robot import make_robot
+from ..._spatial import inertia_matrix3, params_to_com, skew
+from ...identify._physical import log_cholesky_pseudo_inertia, pseudo_inertia_to_params
+from ...effects import KelvinVoigt, Payload, Spring, StructuralDamping, complex_modulus
 
 VISCOUS = KelvinVoigt(1.0)  # every site's default law: the loss stiffness c_s is a viscous coefficient
 

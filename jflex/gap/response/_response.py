@@ -23,15 +23,15 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from .._fold import fold_kinematics
-from .._model import Model
-from .._simulate import simulate
-from .._model import model_inverse_dynamics, initial_state
-from ..effects import FlexibleJoints
-from ..effects._flexible_joint import smooth_dead_zone
-from .._inputs import Sampled
-from ._effect_term import FamilyCoefficients
-from ._inertia import tolerance_spread
+from ..._fold import fold_kinematics
+from ..._model import Model
+from ..._simulate import simulate
+from ..._model import model_inverse_dynamics, initial_state
+from ...effects import FlexibleJoints
+from ...effects._flexible_joint import smooth_dead_zone
+from ..._inputs import Sampled
+from .._effect_term import FamilyCoefficients
+from .._inertia import tolerance_spread
 
 TIP_CHANNELS = {"tip_x": 0, "tip_y": 1, "tip_z": 2}  # [m] origin of the case's tool_frame, base axes
 RTOL, ATOL = 1e-7, 1e-9  # the records' noise is ~1e-4 of their spread: the solver error stays far below

@@ -14,7 +14,7 @@ import pathlib
 
 import numpy as np
 
-from ._selection import MIN_NAMED_SHRINK, MIN_STEP_SHRINK, vetoed
+from ..judge._selection import MIN_NAMED_SHRINK, MIN_STEP_SHRINK, vetoed
 
 SECTIONS = {
     "summary": "Verdict",

@@ -21,14 +21,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._dynamics import _rnea
-from .._program_cache import persistent_jit
-from .._sweep import flagged_vmap
-from ..identify._physical import pseudo_inertia, pseudo_inertia_to_params
-from ..identify._signal import motion_band, zero_phase_lowpass
-from ..effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
-from ._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
-from ._torque import (CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, on_rows, predict, term_columns,
+from ..._dynamics import _rnea
+from ..._program_cache import persistent_jit
+from ..._sweep import flagged_vmap
+from ...identify._physical import pseudo_inertia, pseudo_inertia_to_params
+from ...identify._signal import motion_band, zero_phase_lowpass
+from ...effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
+from .._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
+from ._set import (CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, on_rows, predict, term_columns,
                       weighted_inertia_columns)
 
 # [s] grid of sensor delays, of either sign: the torque lagging the angles (d > 0), or the encoders

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._problem import Candidate, Problem, State
-from . import _torque as T
-from ._frequency_kinds import frequency_kinds
-from ._torque_terms import KINDS, make_term
+from .._problem import Candidate, Problem, State
+from ..torque import _set as T
+from ..frequency._kinds import frequency_kinds
+from ..torque._terms import KINDS, make_term
 
 
 def n_params(c: Candidate, user=None, torque: bool = True, problem: Problem | None = None) -> int:

@@ -40,8 +40,8 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.optimize as so
 
-from . import _frequency_model as L
-from ._inertia import InertiaPrior, tolerance_spread
+from . import _model as L
+from .._inertia import InertiaPrior, tolerance_spread
 
 
 class _Shifted(L.FrequencyModel):

@@ -14,13 +14,13 @@ import warnings
 
 import numpy as np
 
-from .._config import load_robot
-from .._errors import ConfigError, DataError, JFlexError
-from .._runs import load_yaml
-from .._schema import validate
-from ..data._condition import BRIDGE, MAX_GAP, condition_torque, split_at_gaps
-from ..data._npz import load_npz_fields
-from ..data._posture import yaml_posture as yaml_posture
+from ..._config import load_robot
+from ..._errors import ConfigError, DataError, JFlexError
+from ..._runs import load_yaml
+from ..._schema import validate
+from ...data._condition import BRIDGE, MAX_GAP, condition_torque, split_at_gaps
+from ...data._npz import load_npz_fields
+from ...data._posture import yaml_posture as yaml_posture
 from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, RobotSpec, file_format
 
 __all__ = ["Case", "Dataset", "load_case", "case_path", "EFFECT_NAMES", "KINDS", "SPLITS"]
@@ -255,8 +255,8 @@ def _too_short(data, report, options) -> str | None:
     (:func:`jflex.gap.torque_set`, with the case's ``filter_cutoff_hz`` and ``decimate``), or None:
     angles low-passed there lose ``EDGE_PERIODS`` periods of the cutoff at each end to the filter's
     transients and keep at least 20 samples per decimation step between them."""
-    from ..data._condition import choose_cutoff
-    from ._torque import CUTOFF_FACTOR, CUTOFF_LIMIT, EDGE_PERIODS
+    from ...data._condition import choose_cutoff
+    from ..torque._set import CUTOFF_FACTOR, CUTOFF_LIMIT, EDGE_PERIODS
 
     t = data["t"]
     if report.get("derivatives") == "given":  # used as they are, unfiltered
@@ -431,7 +431,7 @@ def _uniform_response(arrs, path):
     """A response set's rows resampled onto a uniform grid when its stamps jitter or drop samples
     (:func:`jflex.data.resample_uniform`); ``(arrays, sampling report or None)``. Malformed
     fields are left to :func:`_response` to name."""
-    from ..data._condition import resample_uniform
+    from ...data._condition import resample_uniform
 
     try:
         t = np.asarray(arrs["t"], float)
@@ -486,7 +486,7 @@ def _response_motion(t, tau, y, ch, path, robot):
     """
     from scipy.signal import savgol_filter
 
-    from ._torque import _id_batch, on_rows
+    from ..torque._set import _id_batch, on_rows
 
     if t.size < 20:
         raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
@@ -580,8 +580,8 @@ def _refuse_mimic(robot, file):
 def _load_reduced_robot(rs, base, file, allow_outside):
     """The robot of a ``robot: {file, joints, lock}`` entry: a URDF (or a robot YAML / config name
     resolving to one) reduced to ``joints``, the others locked (:func:`jflex.load_urdf`)."""
-    from .._config import _example_robot_urdf, robot_from_config
-    from .._urdf import load_urdf
+    from ..._config import _example_robot_urdf, robot_from_config
+    from ..._urdf import load_urdf
 
     spec = rs.file
     suffix = pathlib.PurePath(spec).suffix.lower()
@@ -680,13 +680,13 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
     bridge is split at them into several data sets (see :class:`Dataset`), a stretch too short
     for the low-pass dropped; both are warned of (a ``UserWarning``, kept in ``Case.warnings`` and
     the first stretch's ``conditioning["warnings"]``). The schema of ``case.yaml`` is
-    :class:`jflex.gap._schema.CaseSpec` (the table in ``docs/case_format.md``).
+    :class:`jflex.gap.case._schema.CaseSpec` (the table in ``docs/case_format.md``).
     """
-    from ..data._csv import read_csv
-    from ..data._npz import read_npz
-    from ..data._record import Record
-    from ..data._rosbag import read_rosbag
-    from ..data._uff import uff_arrays
+    from ...data._csv import read_csv
+    from ...data._npz import read_npz
+    from ...data._record import Record
+    from ...data._rosbag import read_rosbag
+    from ...data._uff import uff_arrays
 
     p = pathlib.Path(path)
     file = p / "case.yaml" if p.is_dir() else p

@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import _frequency_model as L
-from ._torque import _filtered, _product
+from ..frequency import _model as L
+from ..torque._set import _filtered, _product
 
 if TYPE_CHECKING:
-    from ._case import Case
-    from ._problem import Problem
+    from ..case._case import Case
+    from .._problem import Problem
 
 def robust_sigma(x):
     x = np.asarray(x).ravel()
@@ -479,7 +479,7 @@ def _history_terms(s, j: int) -> np.ndarray:
     second rates; and, for every moving joint ``k``, the change of joint ``j``'s rigid torque when
     link ``k`` lags by its own play's displacement (the nominal model's inertia and gravity weigh
     it with the posture; a play at one joint loads the others through the inertia matrix)."""
-    from ._torque_terms import link_lag_column, play
+    from ..torque._terms import link_lag_column, play
 
     def make():
         q = np.asarray(s.q, float)

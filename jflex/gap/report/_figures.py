@@ -12,7 +12,7 @@ import pathlib
 
 import numpy as np
 
-from . import _frequency_model as L
+from ..frequency import _model as L
 
 MEASURED, NOMINAL, FINAL = ("k", 1.3, "-"), ("C0", 1.0, "--"), ("C3", 1.0, "-")
 DPI = 110

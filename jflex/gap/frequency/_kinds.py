@@ -18,8 +18,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..effects import damping_laws
-from . import _frequency_model as L
+from ...effects import damping_laws
+from . import _model as L
 
 
 def law_candidates() -> dict:

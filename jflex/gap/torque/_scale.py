@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _torque as T
+from . import _set as T
 
 GAIN_LIMIT = 3.0  # a measured torque GAIN_LIMIT x the model's, or 1/GAIN_LIMIT of it: beyond any payload
 # or inertia error a diagnosis could name (an unmodelled payload heavier than the arm's own links)
@@ -109,7 +109,7 @@ def _not_a_payload(pb, state, suspects: list[dict]) -> list[dict]:
     misfit the payload leaves at most where the gain leaves it is no scale error."""
     if not suspects or state.tfit is None or any(getattr(s, "robot", None) is None for s in pb.ttrain):
         return suspects  # (sets without their robot: no payload's columns to fit)
-    from ._torque_terms import make_term
+    from ._terms import make_term
 
     fit = T.fit_with(state.tfit.terms, state.tfit.delay, make_term("payload", None), pb.ttrain,
                      getattr(pb, "inertia", None))

@@ -1,0 +1,1 @@
+"""The frequency side: FRF and modal data against the linearised model, and its candidates."""

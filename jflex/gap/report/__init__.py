@@ -1,0 +1,1 @@
+"""The report: Markdown, HTML and figures written from a diagnosis."""

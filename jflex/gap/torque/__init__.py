@@ -1,0 +1,1 @@
+"""The torque side: measured torque sets, the candidate effects' torque columns and the scale check."""
