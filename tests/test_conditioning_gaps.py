@@ -12,7 +12,7 @@ import pytest
 
 import jflex
 from jflex.data import choose_cutoff, condition_torque, resample_uniform
-from jflex.identify._signal import angle_noise
+from jflex.data._signal import angle_noise
 
 JOINTS = ["a", "b"]
 

@@ -124,7 +124,7 @@ def test_nearest_rigid_body_is_a_body_and_locally_nearest():
 def test_velocity_lag_of_a_backward_difference_is_half_a_sample():
     """A drive that logs the backward difference of its encoder reads its velocity h/2 late; logged
     exactly (the derivative of the angle), no lag."""
-    from jflex.identify._signal import velocity_lag
+    from jflex.data._signal import velocity_lag
 
     h = 1e-3
     t = np.arange(6000) * h

@@ -159,7 +159,7 @@ def test_black_box_floor_does_not_count_gear_play_as_noise():
     effect[:, 0] = 0.4 * np.gradient(np.gradient(lag, h), h) + 30.0 * lag
     effect[:, 0] *= 8 * true[0] / effect[:, 0].std()
     # through the record's parallel low-pass (8 Hz), as a diagnosis sees torques and model columns
-    from jflex.identify._signal import zero_phase_lowpass
+    from jflex.data._signal import zero_phase_lowpass
 
     s = types.SimpleNamespace(t=t, q=q, qd=qd, qdd=qdd, F0=F0, lp=lambda X: zero_phase_lowpass(X, h, 8.0))
     r = s.lp(effect + noise)

@@ -12,7 +12,7 @@ import pytest
 import jflex
 from jflex.gap.judge._noise import noise_floor
 from jflex.gap._problem import Problem
-from jflex.identify._signal import zero_phase_lowpass
+from jflex.data._signal import zero_phase_lowpass
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
 reallog = pytest.importorskip("independent.reallog")

@@ -10,7 +10,7 @@ import pytest
 from scipy.signal import butter, sosfiltfilt
 
 import jflex.gap.torque._set as T
-from jflex.identify._signal import BUTTER_ORDER
+from jflex.data._signal import BUTTER_ORDER
 
 RATE, CUTOFF = 100.0, 5.0
 

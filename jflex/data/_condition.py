@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._errors import DataError
+from ._signal import angle_noise, motion_band, power_band
 
 JITTER = 0.01  # largest deviation of a step from the median step kept as it is (relative)
 DROP = 1.5  # a step over 1.5 median steps: samples were dropped there
@@ -93,12 +94,10 @@ def clean_stamps(t, arrays: dict, where: str):
 
 def _gap_band(t, q, h: float, max_gap: float) -> float | None:
     """The band [Hz] of angles ``q`` (N, m) at stamps ``t`` (median step ``h``): where
-    ``ENERGY_FRACTION`` of their power lies (:func:`jflex.identify._signal.power_band`) over the
+    ``ENERGY_FRACTION`` of their power lies (:func:`jflex.data._signal.power_band`) over the
     longest stretch without a step over ``max_gap`` median steps, at its mean step (jitter and
     single dropped samples hardly move it; a band against the angle noise would, jitter reading as
     noise); None when that stretch is too short to tell (under 256 samples)."""
-    from ..identify._signal import power_band
-
     q = np.asarray(q, float).reshape(t.size, -1)
     if not q.shape[1]:
         return None
@@ -481,7 +480,7 @@ def choose_cutoff(q, dt: float, *, qd=None, factor: float = CUTOFF_FACTOR, decim
     """The low-pass cutoff [Hz] of one record, from its own angle spectrum, always inside
     ``(0, limit x Nyquist)`` (the Nyquist frequency after ``decimate``).
 
-    First ``factor`` x the motion's band (:func:`jflex.identify.motion_band`: where the angle
+    First ``factor`` x the motion's band (:func:`jflex.data._signal.motion_band`: where the angle
     spectrum stands above the angle noise). When that gives no answer (nothing above the noise, or a
     band whose cutoff would not lie below ``limit`` x Nyquist: quantised, pre-filtered or
     interpolated angles, whose sample-to-sample noise estimate is too low), the fallback
@@ -495,8 +494,6 @@ def choose_cutoff(q, dt: float, *, qd=None, factor: float = CUTOFF_FACTOR, decim
     **Returns** ``(cutoff, info)``: info names the ``method`` and holds ``motion_band_hz``,
     ``nyquist_hz`` and ``angle_noise_rad``."""
     from scipy.signal import detrend, welch
-
-    from ..identify._signal import angle_noise, motion_band
 
     q = np.asarray(q, float)
     nyq = float(0.5 / (dt * max(int(decimate), 1)))

@@ -4,18 +4,24 @@ An NPZ file is a zip archive of ``.npy`` members. Only the fields a data set use
 each is refused by the size its own ``.npy`` header declares (shape x item size) before a byte of
 its data is decompressed: an archive whose unused member would inflate to gigabytes costs
 nothing, and a used one that large is named instead of filling the memory.
+
+:func:`load_npz` is the identification's strict form: named fields, each finite and as long as
+the time axis, the time axis strictly increasing (and evenly spaced when asked).
 """
 
 from __future__ import annotations
 
+import os
 import pathlib
 import zipfile
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.lib import format as npy_format
 
 from .._errors import ConfigError, DataError
 from ._record import Record, channels_of
+from ._validate import check_finite, check_lengths, check_time
 
 # the largest field read (decompressed): 1 GiB holds 10^7 samples of 13 joints with ten repeats
 MAX_FIELD_BYTES = 1 << 30
@@ -86,3 +92,47 @@ def read_npz(path: pathlib.Path, field: str, case_file, keys=None) -> Record:
     if "joints" in arrs:
         names = [str(s) for s in np.asarray(arrs["joints"]).ravel()]
     return Record(arrs, channels_of(arrs, path.name, names))
+
+
+def load_npz(
+    path: str | os.PathLike,
+    fields: Sequence[str],
+    *,
+    time: str | None = "t",
+    uniform: bool = False,
+    optional: Sequence[str] = (),
+) -> dict[str, np.ndarray]:
+    """Load an NPZ data file and validate it.
+
+    **Arguments:**
+
+    - ``path``: the ``.npz`` file.
+    - ``fields``: required arrays; each must be finite and have as many samples (axis 0) as the
+      time axis.
+    - ``time``: name of the time field [s] (checked strictly increasing), or ``None``.
+    - ``uniform``: require an even time step (FFT filtering, spectral differentiation, FRFs).
+    - ``optional``: fields checked the same way when present.
+
+    **Returns:** dict field -> float array.
+    """
+    path = pathlib.Path(path)
+    src = str(path)
+    if not path.is_file():
+        raise DataError(f"{src}: data file not found")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            raw = {k: np.asarray(z[k]) for k in z.files}
+    except Exception as exc:  # numpy raises several types for a corrupt archive
+        raise DataError(f"{src}: not a readable NPZ archive ({exc})") from None
+    want = ([time] if time else []) + list(fields)
+    missing = [k for k in want if k not in raw]
+    if missing:
+        raise DataError(f"{src}: missing field(s) {missing}; the file has {sorted(raw)}")
+    out = {}
+    if time:
+        out[time] = check_time(raw[time], time, src, uniform=uniform)
+    for k in list(fields) + [k for k in optional if k in raw]:
+        out[k] = check_finite(raw[k], k, src).astype(float if not np.iscomplexobj(raw[k]) else complex)
+    if time:
+        check_lengths({time: out[time], **{k: out[k] for k in out if k != time}}, src)
+    return out

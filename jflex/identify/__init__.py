@@ -7,10 +7,11 @@ SciPy's linear algebra only, ``lscf`` SciPy's signal tools, ``fit`` optimistix, 
 
 import typing as _typing
 
-# private module -> public names it defines
+# module -> public names it defines (the data layer's checks and signal tools among them)
 _LAZY_MODULES = {
-    "._data": ("check_finite", "check_lengths", "check_shape", "check_time", "load_npz",),
-    "._signal": ("fft_lowpass", "spectral_derivatives",),
+    "..data._validate": ("check_finite", "check_lengths", "check_shape", "check_time",),
+    "..data._npz": ("load_npz",),
+    "..data._signal": ("fft_lowpass", "spectral_derivatives",),
     "._regressor": ("Regressor", "random_samples",),
     "._base_params": ("BaseParameters", "base_parameters",),
     "._ls": ("LSResult", "instrumental_variables", "ols", "wls",),
@@ -46,14 +47,14 @@ if _typing.TYPE_CHECKING:  # static tools see the eager imports
     """Identification: equation-error (regressor least squares, base parameters, excitation design,
     physically consistent estimates) and output-error fits with optimistix, plus EMA helpers."""
     
-    from ._data import (
+    from ..data._validate import (
         check_finite as check_finite,
         check_lengths as check_lengths,
         check_shape as check_shape,
         check_time as check_time,
-        load_npz as load_npz,
     )
-    from ._signal import fft_lowpass as fft_lowpass, spectral_derivatives as spectral_derivatives
+    from ..data._npz import load_npz as load_npz
+    from ..data._signal import fft_lowpass as fft_lowpass, spectral_derivatives as spectral_derivatives
     from ._regressor import Regressor as Regressor, random_samples as random_samples
     from ._base_params import BaseParameters as BaseParameters, base_parameters as base_parameters
     from ._ls import LSResult as LSResult, instrumental_variables as instrumental_variables, ols as ols, wls as wls

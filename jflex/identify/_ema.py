@@ -10,7 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._errors import DataError
-from ._data import check_finite
+from ..data._validate import check_finite
 
 
 class FRFEstimate(NamedTuple):

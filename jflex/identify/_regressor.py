@@ -16,7 +16,7 @@ import numpy as np
 from .._checks import checked_arrays, guard
 from .._robot import PRISMATIC, Robot
 from .._tree import support
-from ._data import check_finite, check_shape
+from ..data._validate import check_finite, check_shape
 
 _PI_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 

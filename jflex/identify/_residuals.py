@@ -15,7 +15,7 @@ from .._errors import DataError
 from .._model import model_inverse_dynamics
 from ..linear import best_permutation, frf as model_frf, linearization, mac
 from ..linear._common import tool_jacobian
-from ._data import check_finite, check_lengths, check_shape, check_time
+from ..data._validate import check_finite, check_lengths, check_shape, check_time
 from ._fit import AbstractData
 
 

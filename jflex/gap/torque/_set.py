@@ -24,7 +24,7 @@ import scipy.optimize as so
 from ..._dynamics import rnea
 from ..._errors import DataError
 from ..._sweep import flagged_vmap
-from ...identify._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
+from ...data._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
                                 motion_band, velocity_lag, zero_phase_lowpass)
 
 

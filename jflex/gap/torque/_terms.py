@@ -25,7 +25,7 @@ from ..._dynamics import _rnea
 from ..._program_cache import persistent_jit
 from ..._sweep import flagged_vmap
 from ...identify._physical import pseudo_inertia, pseudo_inertia_to_params
-from ...identify._signal import motion_band, zero_phase_lowpass
+from ...data._signal import motion_band, zero_phase_lowpass
 from ...effects._linear import TORQUE_FRACTION, CandidateInfo, DataScale, on_register, registered_candidates
 from .._effect_term import FAMILIES, FAMILY_META, family_columns, family_of
 from ._set import (CUTOFF_FACTOR, TorqueSet, TorqueTerm, _id_batch, fit_terms, on_rows, predict, term_columns,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._errors import DataError
-from ._data import check_finite
+from ._validate import check_finite
 
 
 def _spectrum(x, dt):

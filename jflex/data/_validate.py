@@ -1,4 +1,4 @@
-"""Loading and validating measured data files (NPZ) before anything is traced.
+"""Validating measured arrays before anything is traced: finite values, time axes, lengths, shapes.
 
 Every check raises :class:`jflex.DataError` naming the file and the field at fault and what is
 expected, so a bad file never turns into a silent NaN deep inside a fit.
@@ -6,8 +6,6 @@ expected, so a bad file never turns into a silent NaN deep inside a fit.
 
 from __future__ import annotations
 
-import os
-import pathlib
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -84,47 +82,3 @@ def check_shape(x, shape: Sequence[int | None], field: str, source: str | None =
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise DataError(f"{_where(source, field)}: expected shape {want}, got {a.shape}")
     return a
-
-
-def load_npz(
-    path: str | os.PathLike,
-    fields: Sequence[str],
-    *,
-    time: str | None = "t",
-    uniform: bool = False,
-    optional: Sequence[str] = (),
-) -> dict[str, np.ndarray]:
-    """Load an NPZ data file and validate it.
-
-    **Arguments:**
-
-    - ``path``: the ``.npz`` file.
-    - ``fields``: required arrays; each must be finite and have as many samples (axis 0) as the
-      time axis.
-    - ``time``: name of the time field [s] (checked strictly increasing), or ``None``.
-    - ``uniform``: require an even time step (FFT filtering, spectral differentiation, FRFs).
-    - ``optional``: fields checked the same way when present.
-
-    **Returns:** dict field -> float array.
-    """
-    path = pathlib.Path(path)
-    src = str(path)
-    if not path.is_file():
-        raise DataError(f"{src}: data file not found")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            raw = {k: np.asarray(z[k]) for k in z.files}
-    except Exception as exc:  # numpy raises several types for a corrupt archive
-        raise DataError(f"{src}: not a readable NPZ archive ({exc})") from None
-    want = ([time] if time else []) + list(fields)
-    missing = [k for k in want if k not in raw]
-    if missing:
-        raise DataError(f"{src}: missing field(s) {missing}; the file has {sorted(raw)}")
-    out = {}
-    if time:
-        out[time] = check_time(raw[time], time, src, uniform=uniform)
-    for k in list(fields) + [k for k in optional if k in raw]:
-        out[k] = check_finite(raw[k], k, src).astype(float if not np.iscomplexobj(raw[k]) else complex)
-    if time:
-        check_lengths({time: out[time], **{k: out[k] for k in out if k != time}}, src)
-    return out
