@@ -12,3 +12,5 @@ from ._coupled_drive import CoupledDrive as CoupledDrive
 from ._flexible_link import FlexibleLink as FlexibleLink
 from ._spring import Spring as Spring
 from ._rigid_additions import Payload as Payload, RotorInertia as RotorInertia
+from ._measured_joint import (Backlash as Backlash, DriveGain as DriveGain, JointCompliance as JointCompliance, SensorDelay as SensorDelay, compliance_deflection as compliance_deflection, delayed as delayed, first_order_zero_phase as first_order_zero_phase, loaded_play_side as loaded_play_side, play as play, scaled_torque as scaled_torque)  # noqa: E501
+from ._registry import EFFECT_NAMES as EFFECT_NAMES, EFFECTS as EFFECTS

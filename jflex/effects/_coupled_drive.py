@@ -25,6 +25,7 @@ from .._errors import ParameterError, ShapeError
 from ._base import Slots, joint_indices
 from ._flexible_joint import _concrete
 from ._linear import AbstractLinearEffect, CandidateInfo, DataScale, TORQUE_FRACTION, register_candidate
+from ._registry import COUPLED_DRIVE
 
 SMOOTH_SIGN = 5e-3  # [rad/s] width of a candidate's smooth sign (dry friction is sharp)
 # coupling ratios a candidate tries: a motor row [1, c] on the joint pair (joint-side units; the
@@ -66,7 +67,7 @@ class CoupledDrive(AbstractLinearEffect):
     linear_leaves = ("inertia", "viscous", "coulomb")
     units = ("kg m^2", "N m s/rad", "N m")
     candidate = CandidateInfo(
-        name="coupled_drive", build=_candidate, placements=_wrist_pairs, per_joint_law=False,
+        name=COUPLED_DRIVE, build=_candidate, placements=_wrist_pairs, per_joint_law=False,
         signature="torque at one joint of a wrist pair following the other joint's motion",
         hyper=(COUPLING_RATIOS, "coupling ratio", 1.0), size=2)
 

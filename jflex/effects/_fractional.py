@@ -22,6 +22,7 @@ import numpy as np
 
 from .._errors import ParameterError
 from ._damping import AbstractDampingLaw
+from ._registry import FRACTIONAL_DAMPING
 
 
 def oustaloup(alpha, w_lo, w_hi, order: int):
@@ -77,7 +78,7 @@ class Fractional(AbstractDampingLaw):
     w_hi: jnp.ndarray
     order: int = eqx.field(static=True)
     loss: ClassVar[str] = "k_e"
-    candidate: ClassVar[str] = "fractional_damping"
+    candidate: ClassVar[str] = FRACTIONAL_DAMPING
     shape: ClassVar[tuple] = ("alpha", 0.1, 0.95)
     signature: ClassVar[str] = "damping ratio growing as w^(alpha-1)"
 

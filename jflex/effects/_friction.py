@@ -10,6 +10,7 @@ from .._errors import ParameterError, ShapeError
 from ._base import AbstractEffect, Slots, joint_indices
 from ._flexible_joint import _concrete
 from ._linear import AbstractLinearEffect, CandidateInfo, DataScale, register_candidate, torque_bound
+from ._registry import ASYMMETRIC_COULOMB, COULOMB_FRICTION
 
 
 class JointFriction(AbstractEffect):
@@ -92,10 +93,10 @@ class AsymmetricCoulomb(AbstractLinearEffect):
     linear_leaves = ("positive", "negative")
     units = ("N m", "N m")
     candidate = CandidateInfo(
-        name="asymmetric_coulomb", build=lambda joints, hyper: AsymmetricCoulomb(joints, 1.0, 1.0, SMOOTH_SIGN),
+        name=ASYMMETRIC_COULOMB, build=lambda joints, hyper: AsymmetricCoulomb(joints, 1.0, 1.0, SMOOTH_SIGN),
         placements=_every_joint, signature="sign of velocity, a different level in each direction",
         # beside a nominal symmetric Coulomb law it adds a constant alone: the torque offset's candidate
-        subsumed_by="coulomb_friction")
+        subsumed_by=COULOMB_FRICTION)
 
     def __init__(self, joints, positive=0.0, negative=0.0, smoothing=1e-3):
         self.joints = tuple(joints)

@@ -35,6 +35,7 @@ import numpy as np
 
 from .._errors import ParameterError
 from ._damping import AbstractDampingLaw
+from ._registry import HYSTERETIC_DAMPING
 
 
 def virgin_curve(x, h0, delta):
@@ -78,7 +79,7 @@ class Hysteretic(AbstractDampingLaw):
     reversal_rate: jnp.ndarray
     reversal_width: jnp.ndarray | None
     loss: ClassVar[str] = "eta"
-    candidate: ClassVar[str] = "hysteretic_damping"
+    candidate: ClassVar[str] = HYSTERETIC_DAMPING
     signature: ClassVar[str] = "damping ratio flat in frequency"
 
     @classmethod

@@ -10,6 +10,7 @@ from .._errors import ParameterError, ShapeError
 from ._base import Slots, joint_indices
 from ._flexible_joint import _concrete
 from ._linear import AbstractLinearEffect, CandidateInfo, DataScale, register_candidate, torque_bound
+from ._registry import TORQUE_OFFSET
 
 
 def _every_joint(n):
@@ -31,7 +32,7 @@ class TorqueOffset(AbstractLinearEffect):
     linear_leaves = ("offset",)
     units = ("N m",)
     candidate = CandidateInfo(
-        name="torque_offset", build=lambda joints, hyper: TorqueOffset(joints, 1.0), placements=_every_joint,
+        name=TORQUE_OFFSET, build=lambda joints, hyper: TorqueOffset(joints, 1.0), placements=_every_joint,
         signature="a constant share of the residual at the joint", nonnegative=False)
 
     def __init__(self, joints, offset=0.0):

@@ -26,7 +26,10 @@ from .._errors import ParameterError
 from .._sweep import flagged_vmap
 from .._model import Model, _effect_kinetic, _effect_potential, initial_state
 from ..identify._fit import Free, ParameterSpec
-from .torque._set import TorqueTerm
+from ..effects._linear import TORQUE_FRACTION
+from ..effects._registry import (COULOMB_FRICTION, FAMILY_META, GRAVITY_COMPENSATOR, PAYLOAD, ROTOR_INERTIA,
+                                STRIBECK_FRICTION, STRIBECK_VS, VISCOUS_FRICTION, FamilyMeta)
+from .torque._set import TorqueTerm, on_rows, term_columns
 
 LINEARITY_RTOL = 1e-6  # columns at the start and at twice the start must agree this well
 
@@ -168,14 +171,31 @@ class EffectTerm(TorqueTerm):
         parts.extra += list(m.effects)
 
     def implausible(self, theta, sets):
-        from .torque._terms import torque_share_implausible  # the generic range: a user's law declares none
-
         return torque_share_implausible(self, theta, sets)
+
+
+def torque_share_implausible(term, theta, sets) -> str | None:
+    """The generic range of a term's coefficients: the torque it accounts for at each joint (rms)
+    at most ``TORQUE_FRACTION`` x the measured torque's rms there (an effect that needs more torque
+    than the joint ever showed cancels another term rather than describing the machine)."""
+    if not term.n_params or not sets:
+        return None
+    theta = np.asarray(theta, float)
+    num = sum(np.sum((term_columns(term, s) @ theta) ** 2, axis=0) for s in sets)
+    den = sum(np.sum(s.tau**2, axis=0) for s in sets)
+    rows = sum(s.tau.shape[0] for s in sets)
+    r, lim = np.sqrt(num / rows), TORQUE_FRACTION * np.sqrt(den / rows)
+    j = int(np.argmax(r / np.maximum(lim, 1e-300)))
+    if r[j] <= lim[j]:
+        return None
+    names = sets[0].robot.joint_names
+    vals = ", ".join(f"{k} = {v:.4g}" for k, v in term.parameters(theta).items())
+    return (f"its torque at {names[j]} ({r[j]:.4g} N m rms) exceeds {TORQUE_FRACTION:g} x the measured torque's rms there "
+            f"({lim[j] / TORQUE_FRACTION:.4g} N m), with {vals}")
 
 
 # --- the built-in torque-side laws, read off jflex.effects ------------------------------------------
 COULOMB_LIMIT = 1e-6  # [rad/s] a Stribeck velocity this small leaves the Coulomb level alone
-STRIBECK_VS = (0.03, 0.06, 0.12, 0.25, 0.5)  # [rad/s] grid of Stribeck velocities a candidate searches
 SMOOTHING = 5e-3  # [rad/s] width of the smooth sign of every Coulomb-like law (dry friction is sharp)
 
 
@@ -188,43 +208,6 @@ def _leaf(attr, i=0):
 _LEAVES: dict = {}
 
 
-@dataclasses.dataclass(frozen=True)
-class FamilyMeta:
-    """What the diagnosis needs to know of a built-in torque-side candidate, whatever the robot.
-
-    A candidate's coefficients ``theta`` (``param_names``, bounded below by ``lower``) map to the
-    family's free parameters at its joint as ``mix @ theta`` (the Stribeck level is fitted as
-    ``Fs - Fc >= 0``). ``hyper``: ``(leaf, grid, label)`` of a nonlinear parameter held per fit and
-    searched on ``grid`` (the Stribeck velocity), else None. ``subsumed_by``: a nominal family at
-    the same joint that already holds this one. ``signature``: what its residual looks like."""
-
-    param_names: tuple
-    lower: tuple
-    mix: np.ndarray
-    per_joint: bool = True
-    hyper: tuple | None = None
-    subsumed_by: str | None = None
-    signature: str = ""
-
-    def spec_lower(self) -> np.ndarray:
-        """Lower bound of each free parameter at a joint: 0 where made of coefficients bounded by 0."""
-        return np.where(np.any((self.mix != 0) & np.isinf(np.asarray(self.lower))[None, :], axis=1), -np.inf, 0.0)
-
-
-FAMILY_META = {
-    "viscous_friction": FamilyMeta(("Fv [N m s/rad]",), (0.0,), np.eye(1), signature="correlation with joint velocity"),
-    "coulomb_friction": FamilyMeta(("Fc [N m]",), (0.0,), np.eye(1), subsumed_by="stribeck_friction",
-                                   signature="correlation with sign of velocity"),
-    "stribeck_friction": FamilyMeta(("Fc [N m]", "Fs-Fc [N m]"), (0.0, 0.0), np.array([[1.0, 0.0], [1.0, 1.0]]),
-                                    hyper=("stribeck_velocity", STRIBECK_VS, "vs [rad/s]"),
-                                    signature="sign of velocity, larger at low speed"),
-    "rotor_inertia": FamilyMeta(("Ia [kg m^2]",), (0.0,), np.eye(1), signature="correlation with joint acceleration"),
-    "gravity_compensator": FamilyMeta(("B_cos1 [N m]", "B_sin1 [N m]", "B_cos2 [N m]", "B_sin2 [N m]"), (-np.inf,) * 4,
-                                      np.eye(4), signature="posture harmonics of the joint angle"),
-    "payload": FamilyMeta(("m [kg]", "m cx [kg m]", "m cy [kg m]", "m cz [kg m]", "Ixx [kg m^2]", "Ixy [kg m^2]",
-                           "Iyy [kg m^2]", "Ixz [kg m^2]", "Iyz [kg m^2]", "Izz [kg m^2]"), (0.0,) + (-np.inf,) * 9,
-                          np.eye(10), per_joint=False, signature="tool-mass regressor columns"),
-}
 FAMILIES = tuple(FAMILY_META)
 
 
@@ -254,29 +237,29 @@ def family(robot, name: str) -> Family:
 
     names = tuple(robot.joint_names)
     n = len(names)
-    if name == "viscous_friction":
+    if name == VISCOUS_FRICTION:
         effs = [E.JointFriction(names, viscous=1.0, smoothing=SMOOTHING)]
         free = (Free("viscous", _leaf("viscous")),)
         per = lambda j: [j]
-    elif name == "coulomb_friction":
+    elif name == COULOMB_FRICTION:
         # stribeck 0: the level is coulomb (1 - exp(-(qd/COULOMB_LIMIT)^2)), linear in it, no bump
         effs = [E.JointFriction(names, coulomb=1.0, stribeck=0.0, stribeck_velocity=COULOMB_LIMIT, smoothing=SMOOTHING)]
         free = (Free("coulomb", _leaf("coulomb")),)
         per = lambda j: [j]
-    elif name == "stribeck_friction":
+    elif name == STRIBECK_FRICTION:
         effs = [E.JointFriction(names, coulomb=1.0, stribeck=1.0, stribeck_velocity=STRIBECK_VS[2], smoothing=SMOOTHING)]
         free = (Free("coulomb", _leaf("coulomb")), Free("stribeck", _leaf("stribeck")))
         per = lambda j: [j, n + j]
-    elif name == "rotor_inertia":
+    elif name == ROTOR_INERTIA:
         effs = [E.RotorInertia(names, 1.0)]
         free = (Free("inertia", _leaf("inertia")),)
         per = lambda j: [j]
-    elif name == "gravity_compensator":
+    elif name == GRAVITY_COMPENSATOR:
         effs = [E.FourierGravityCompensator([1.0, 1.0], joint=j, sine=[1.0, 1.0]) for j in range(n)]
         free = tuple(f for j in range(n) for f in (Free(f"B{j}", _leaf("coefficients", j)), Free(f"A{j}", _leaf("sine", j))))
         # [cos q, sin q, cos 2q, sin 2q] of joint j: B_1, A_1, B_2, A_2
         per = lambda j: [4 * j, 4 * j + 2, 4 * j + 1, 4 * j + 3]
-    elif name == "payload":
+    elif name == PAYLOAD:
         effs = [E.Payload(np.ones(10))]
         free = (Free("payload", _leaf("parameters")),)
         per = lambda j: list(range(10))
@@ -306,8 +289,6 @@ def family_columns(robot, name, hyper, q, qd, qdd) -> np.ndarray:
     fam = family_of(robot, name)
     model = fam.with_hyper(hyper)
     p = fam.spec.physical(fam.spec.pack(model))
-    from .torque._set import on_rows
-
     return on_rows(_columns, (model, fam.spec, p), (q, qd, qdd))
 
 

@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...effects import damping_laws
+from ...effects._registry import JOINT_FLEXIBILITY, LINK_FLEXIBILITY, ORTHOGONAL_COMPLIANCE, PAYLOAD, SITE_EFFECTS
 from . import _model as L
 
 
@@ -66,7 +67,7 @@ class NewSites(FrequencyKind):
 class JointSpring(NewSites):
     """A joint the nominal model holds rigid, made flexible (its link side a new coordinate)."""
 
-    name = "joint_flexibility"
+    name = JOINT_FLEXIBILITY
     n_params = 2
 
     def tried_at(self, pb, joint, flexible):
@@ -80,7 +81,7 @@ class BearingTilt(NewSites):
     """A bearing's tilt stiffness: a full 2x2 (coupled) stiffness about the two axes perpendicular
     to the joint's rotation axis."""
 
-    name = "orthogonal_compliance"
+    name = ORTHOGONAL_COMPLIANCE
     n_params = 4
 
     def sites(self, joint):
@@ -90,7 +91,7 @@ class BearingTilt(NewSites):
 class LinkBending(NewSites):
     """A link's first bending mode, lumped: two coupled hinges half-way along the link."""
 
-    name = "link_flexibility"
+    name = LINK_FLEXIBILITY
     n_params = 4
     on_link = True
 
@@ -115,7 +116,7 @@ class ToolPayload(FrequencyKind):
     of a few centimetres adds a fraction of the lever arm's inertia, which two postures' FRFs do
     not pin."""
 
-    name = "payload"
+    name = PAYLOAD
     per_joint = False
     n_params = 4  # on FRF data, of _frequency_model.PAYLOAD_NAMES: mass and centre of mass
     MODAL_PARAMS = 1  # on modal tables alone: the mass
@@ -173,7 +174,9 @@ class DampingLaw(FrequencyKind):
         return fit_damping_law(pb, lm, x, joint, self.law)
 
 
-SITE_KINDS = {k.name: k for k in (JointSpring(), BearingTilt(), LinkBending(), ToolPayload())}
+# the kind of each site of the registry (jflex.effects._registry.SITE_EFFECTS), in its order
+_BY_SITE = {"joint": JointSpring, "orth": BearingTilt, "link": LinkBending, "tool": ToolPayload}
+SITE_KINDS = {name: _BY_SITE[site]() for name, site in SITE_EFFECTS.items()}
 
 
 def frequency_kinds() -> dict:
