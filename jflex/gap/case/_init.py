@@ -145,6 +145,128 @@ def _split(tt, hold_out, name) -> float:
     return split_s
 
 
+def _checked_arguments(log, out, hold_out, rate) -> tuple[list[pathlib.Path], pathlib.Path, pathlib.Path]:
+    """The logs, the case folder and its case.yaml, after refusing what case_init cannot use
+    (before anything is read or written)."""
+    logs = [pathlib.Path(p) for p in (log if isinstance(log, (list, tuple)) else [log])]
+    if not logs:
+        raise ConfigError("field 'log': no CSV log given")
+    if hold_out is not None:
+        h = hold_out
+        if isinstance(h, bool) or not isinstance(h, (int, float)) or not 0.0 < float(h) < 1.0:
+            raise ConfigError(f"field 'hold_out': expected a fraction in (0, 1) (the part of the log held out for "
+                              f"validation), got {hold_out!r}")
+    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float)) or not np.isfinite(rate)
+                             or rate <= 0):
+        raise ConfigError(f"field 'rate': expected a sample rate > 0 [Hz], got {rate!r}")
+    folder = pathlib.Path(out) if out is not None else logs[0].parent
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{folder}: field 'out': exists and is not a folder (expected the case folder to write "
+                          "case.yaml into, new or existing)")
+    target = folder / "case.yaml"
+    if target.exists():
+        raise ConfigError(f"{target}: exists already (jflex case init does not overwrite a case)")
+    return logs, folder, target
+
+
+def _read_logs(logs, joints, hold_out, rate):
+    """The logs' tables, whether they are separate runs (one header) rather than files of one run,
+    the header the columns are guessed from, the guess (:func:`guess_columns`), and each data
+    set's training end [s] when ``hold_out`` splits them (checked before anything is written)."""
+    tables = [Table(p) for p in logs]
+    runs = len(tables) > 1 and all(tb.header == tables[0].header for tb in tables)
+    header = list(tables[0].header) if runs else [h for tb in tables for h in tb.header]
+    g = guess_columns(header, joints)
+    if rate is not None and g["time"] is not None:
+        raise ConfigError(f"field 'rate': the log has a time column ({g['time']!r}); rate is for logs without one")
+    if len(tables) > 1 and not runs and g["time"] is not None:
+        lacking = [p.name for p, tb in zip(logs, tables) if g["time"] not in tb.header]
+        if lacking:
+            raise ConfigError(f"field 'log': the time column {g['time']!r} is not in {lacking}: logs merged on "
+                              "time each hold it")
+    if hold_out is not None and g["time"] is None and rate is None:
+        raise ConfigError("field 'hold_out': needs the time column, which could not be guessed (or the sample "
+                          "rate: --rate HZ)")
+    # each log's split, checked before anything is written
+    splits = None if hold_out is None else [
+        min(_split(_stamps(tb, g["time"], g["units"].get("time", "s"), rate), float(hold_out), tb.path.name)
+            for tb in group)
+        for group in ([[tb] for tb in tables] if runs else
+                      [[tb for tb in tables if g["time"] is None or g["time"] in tb.header]])]
+    return runs, header, g, splits
+
+
+def _column_map(g, joints, rate, todo: list) -> dict:
+    """The data sets' column map: the guessed columns, a ``TODO`` placeholder (noted in ``todo``)
+    for each one not found."""
+
+    def per_joint(role, what):
+        m = {}
+        for j in joints:
+            m[j] = g[role].get(j, f"{TODO}: column of {j} {what}")
+            if j not in g[role]:
+                todo.append(f"columns.{role}.{j}")
+        return m
+
+    columns = {"position": per_joint("position", "angle"), "torque": per_joint("torque", "torque or motor current")}
+    if rate is None:
+        columns = {"time": g["time"] or f"{TODO}: time column (or give the sample rate: rate: HZ)", **columns}
+        if g["time"] is None:
+            todo.append("columns.time (or rate: the sample rate [Hz] of a log without a time column; --rate)")
+    if all(j in g["velocity"] for j in joints):
+        columns["velocity"] = {j: g["velocity"][j] for j in joints}
+    return columns
+
+
+def _datasets(entry, logs, files, runs, hold_out, splits) -> list[dict]:
+    """The data sets of ``entry`` (one torque data set's fields): one per run, or each log split by
+    ``hold_out`` into training and validation windows; the last run validates otherwise."""
+    if runs:
+        names = [p.stem for p in logs]
+        if len(set(names)) != len(names):
+            names = [f"run{k + 1}" for k in range(len(logs))]
+        per_file = [dict(entry, file=f, name=nm) for f, nm in zip(files, names)]
+    else:
+        per_file = [entry]
+    if hold_out is not None:
+        datasets = []
+        for e, split_s in zip(per_file, splits):
+            base = e.get("name")
+            datasets += [dict(e, name=f"{base}_train" if base else "train", window=[0.0, split_s]),
+                         dict(e, split="validation", name=f"{base}_validation" if base else "validation",
+                              window=[split_s, None])]
+    elif runs:
+        datasets = per_file[:-1] + [dict(per_file[-1], split="validation")]
+    else:
+        datasets = per_file
+    return datasets
+
+
+def _head(logs, files, all_joints, header, reduced, rate, hold_out, runs, todo, datasets) -> list[str]:
+    """The comment lines at the top of the case.yaml: what was guessed, and what is left to fill in."""
+    validation_note = (
+        [f"# The last {100 * float(hold_out):g} % of each log is its validation set (window, seconds from its first "
+         "stamp)."] if hold_out is not None else
+        [f"# {files[-1]} is the validation set (the gap is judged on it), the other runs the training sets."]
+        if runs else
+        ["#   - a validation data set: another log with split: validation (the gap is judged on held-out data), "
+         "or run 'jflex case init' with --hold-out"])
+    return [
+        f"# case.yaml written by 'jflex case init' for {', '.join(p.name for p in logs)} (format: docs/case_format.md).",
+        f"# Robot joints: {all_joints}; CSV columns: {header}.",
+        *([f"# The logs drive {reduced}: the robot is reduced to them (the others locked at 0; add "
+           "robot.lock to lock them elsewhere)."] if reduced else []),
+        *([f"# No time column: the rows are {float(rate):g} Hz apart (rate)."] if rate is not None else []),
+        "# nominal_effects: viscous and Coulomb friction at every joint, fitted on the training data (a real joint",
+        "# has both; without them the candidates, one effect at one joint at a time, are left to explain all of",
+        "# it). Delete an entry the drives compensate, add what else the model already contains.",
+        "# Check the guessed column map and units" + (("; fill in every TODO:") if todo or hold_out is None and not runs
+                                                      else "."),
+        *[f"#   - datasets[{0 if len(datasets) == 1 else '*'}].{t}" for t in dict.fromkeys(todo)],
+        *validation_note,
+    ]
+
+
 def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: float | None = None,
               rate: float | None = None) -> pathlib.Path:
     """Write ``case.yaml`` for the CSV ``log`` (or a list of CSV logs) and the robot ``robot`` (a
@@ -171,46 +293,10 @@ def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: 
 
     **Returns:** the path of the written case.yaml.
     """
-    logs = [pathlib.Path(p) for p in (log if isinstance(log, (list, tuple)) else [log])]
-    if not logs:
-        raise ConfigError("field 'log': no CSV log given")
-    if hold_out is not None:
-        h = hold_out
-        if isinstance(h, bool) or not isinstance(h, (int, float)) or not 0.0 < float(h) < 1.0:
-            raise ConfigError(f"field 'hold_out': expected a fraction in (0, 1) (the part of the log held out for "
-                              f"validation), got {hold_out!r}")
-    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float)) or not np.isfinite(rate)
-                             or rate <= 0):
-        raise ConfigError(f"field 'rate': expected a sample rate > 0 [Hz], got {rate!r}")
-    folder = pathlib.Path(out) if out is not None else logs[0].parent
-    if folder.exists() and not folder.is_dir():
-        raise ConfigError(f"{folder}: field 'out': exists and is not a folder (expected the case folder to write "
-                          "case.yaml into, new or existing)")
-    target = folder / "case.yaml"
-    if target.exists():
-        raise ConfigError(f"{target}: exists already (jflex case init does not overwrite a case)")
+    logs, folder, target = _checked_arguments(log, out, hold_out, rate)
     rob = load_robot(robot)
     joints = list(rob.joint_names)
-    tables = [Table(p) for p in logs]
-    runs = len(tables) > 1 and all(tb.header == tables[0].header for tb in tables)
-    header = list(tables[0].header) if runs else [h for tb in tables for h in tb.header]
-    g = guess_columns(header, joints)
-    if rate is not None and g["time"] is not None:
-        raise ConfigError(f"field 'rate': the log has a time column ({g['time']!r}); rate is for logs without one")
-    if len(tables) > 1 and not runs and g["time"] is not None:
-        lacking = [p.name for p, tb in zip(logs, tables) if g["time"] not in tb.header]
-        if lacking:
-            raise ConfigError(f"field 'log': the time column {g['time']!r} is not in {lacking}: logs merged on "
-                              "time each hold it")
-    if hold_out is not None and g["time"] is None and rate is None:
-        raise ConfigError("field 'hold_out': needs the time column, which could not be guessed (or the sample "
-                          "rate: --rate HZ)")
-    # each log's split, checked before anything is written
-    splits = None if hold_out is None else [
-        min(_split(_stamps(tb, g["time"], g["units"].get("time", "s"), rate), float(hold_out), tb.path.name)
-            for tb in group)
-        for group in ([[tb] for tb in tables] if runs else
-                      [[tb for tb in tables if g["time"] is None or g["time"] in tb.header]])]
+    runs, header, g, splits = _read_logs(logs, joints, hold_out, rate)
     folder.mkdir(parents=True, exist_ok=True)
 
     def local(p: pathlib.Path) -> str:
@@ -225,22 +311,7 @@ def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: 
         reduced = [j for j in joints if j in g["position"]]
         joints = reduced
     todo = []
-
-    def per_joint(role, what):
-        m = {}
-        for j in joints:
-            m[j] = g[role].get(j, f"{TODO}: column of {j} {what}")
-            if j not in g[role]:
-                todo.append(f"columns.{role}.{j}")
-        return m
-
-    columns = {"position": per_joint("position", "angle"), "torque": per_joint("torque", "torque or motor current")}
-    if rate is None:
-        columns = {"time": g["time"] or f"{TODO}: time column (or give the sample rate: rate: HZ)", **columns}
-        if g["time"] is None:
-            todo.append("columns.time (or rate: the sample rate [Hz] of a log without a time column; --rate)")
-    if all(j in g["velocity"] for j in joints):
-        columns["velocity"] = {j: g["velocity"][j] for j in joints}
+    columns = _column_map(g, joints, rate, todo)
     files = [local(p) for p in logs]
     entry = {"kind": "torque", "file": files[0] if len(files) == 1 else files, "split": "train", "columns": columns}
     if rate is not None:
@@ -251,46 +322,9 @@ def case_init(robot: str, log, out: str | pathlib.Path | None = None, hold_out: 
         todo.append("scale (torque constant [N m/A] x gear ratio of each motor current column; the case is refused "
                     "until it is filled in)")
     entry["units"] = {"time": g["units"].get("time", "s"), "position": g["units"].get("position", "rad")}
-    if runs:
-        names = [p.stem for p in logs]
-        if len(set(names)) != len(names):
-            names = [f"run{k + 1}" for k in range(len(logs))]
-        per_file = [dict(entry, file=f, name=nm) for f, nm in zip(files, names)]
-    else:
-        per_file = [entry]
-    if hold_out is not None:
-        datasets = []
-        for e, split_s in zip(per_file, splits):
-            base = e.get("name")
-            datasets += [dict(e, name=f"{base}_train" if base else "train", window=[0.0, split_s]),
-                         dict(e, split="validation", name=f"{base}_validation" if base else "validation",
-                              window=[split_s, None])]
-    elif runs:
-        datasets = per_file[:-1] + [dict(per_file[-1], split="validation")]
-    else:
-        datasets = per_file
+    datasets = _datasets(entry, logs, files, runs, hold_out, splits)
     cfg = {"robot": {"file": robot_entry, "joints": reduced} if reduced else robot_entry,
            "nominal_effects": [dict(e) for e in NOMINAL_FRICTION], "datasets": datasets}
-    validation_note = (
-        [f"# The last {100 * float(hold_out):g} % of each log is its validation set (window, seconds from its first "
-         "stamp)."] if hold_out is not None else
-        [f"# {files[-1]} is the validation set (the gap is judged on it), the other runs the training sets."]
-        if runs else
-        ["#   - a validation data set: another log with split: validation (the gap is judged on held-out data), "
-         "or run 'jflex case init' with --hold-out"])
-    head = [
-        f"# case.yaml written by 'jflex case init' for {', '.join(p.name for p in logs)} (format: docs/case_format.md).",
-        f"# Robot joints: {list(rob.joint_names)}; CSV columns: {header}.",
-        *([f"# The logs drive {reduced}: the robot is reduced to them (the others locked at 0; add "
-           "robot.lock to lock them elsewhere)."] if reduced else []),
-        *([f"# No time column: the rows are {float(rate):g} Hz apart (rate)."] if rate is not None else []),
-        "# nominal_effects: viscous and Coulomb friction at every joint, fitted on the training data (a real joint",
-        "# has both; without them the candidates, one effect at one joint at a time, are left to explain all of",
-        "# it). Delete an entry the drives compensate, add what else the model already contains.",
-        "# Check the guessed column map and units" + (("; fill in every TODO:") if todo or hold_out is None and not runs
-                                                      else "."),
-        *[f"#   - datasets[{0 if len(datasets) == 1 else '*'}].{t}" for t in dict.fromkeys(todo)],
-        *validation_note,
-    ]
+    head = _head(logs, files, list(rob.joint_names), header, reduced, rate, hold_out, runs, todo, datasets)
     target.write_text("\n".join(head) + "\n" + yaml.dump(cfg, Dumper=_Dumper, sort_keys=False))
     return target
