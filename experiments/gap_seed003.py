@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import pathlib
+import sys
 
 import numpy as np
 import yaml
@@ -32,12 +33,16 @@ import jflex
 from jflex._runs import quick_check
 from jflex.gap import diagnose, write_report
 
+# the thesis' robots: a sibling module of the experiments (their folder is no package in a checkout)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from _machining_robot import MachiningRobot  # noqa: E402
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
 def _seed_robot(cfg_name):
     path = ROOT / "configs" / "seed003" / cfg_name
-    rob = jflex.Seed003Robot.from_config(path)
+    rob = MachiningRobot.from_config(path)
     r, _ = rob.fit_common_ratio(0, rob.cfg["gear_ratios"].get("bounds", [20, 600]), "actuated")
     model = rob.model(np.full(3, r))
     return rob, model.robot, r
@@ -52,7 +57,7 @@ def _robot_yaml(folder, rob, robot, r):
     # tilts joint 1, as orthogonal_compliance does: an assumption, stated in the notes)
     P[0, 4] = P[0, 6] = 0.5 * P[0, 9]
     np.savez(folder / "inertia.npz", inertia=P)  # a base-parameter realisation: not physical per link
-    base["notes"] = (f"link parameters realised from the identified base parameters (jflex.Seed003Robot), "
+    base["notes"] = (f"link parameters realised from the identified base parameters (experiments/_machining_robot.py), "
                      f"common gear ratio {r:.1f} (rotor share on the held motors); link1 Ixx = Iyy = Izz/2 assumed")
     (folder / "robot.yaml").write_text(yaml.safe_dump(base, sort_keys=False))
 

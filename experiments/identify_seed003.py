@@ -10,7 +10,7 @@ parameters of Tables 3.3/3.6 realised as link inertias, rotors held) is fitted w
 three configurations together, and the prediction errors are reported beside the thesis'.
 The thesis averages differently per robot: 5.47 % (Staubli) over all nine rows, 12.8 % (Kuka) over
 configurations 2-3. Model modes are paired with the table rows by shape likeness to configuration 1
-(``Seed003Robot.row_order``, :func:`jflex.linear.pair_modes`); the rotors are the config's per-joint
+(``MachiningRobot.row_order``, :func:`jflex.linear.pair_modes`); the rotors are the config's per-joint
 reflected inertias.
 
     python experiments/identify_seed003.py [CONFIG] [--out DIR]
@@ -31,6 +31,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 import jflex
 from jflex import identify as idf
+
+# the thesis' robots: a sibling module of the experiments (their folder is no package in a checkout)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from _machining_robot import MachiningRobot  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "identify_seed003.yaml"
@@ -61,7 +65,7 @@ class IdentifySeed003Config(_Strict):
     max_steps: Annotated[int, Field(ge=1)] = 100
 
 
-# --- the thesis' model: jflex.Seed003Robot (shared with posture_modal, seed003_prediction, gap_seed003)
+# --- the thesis' model: _machining_robot.MachiningRobot (shared with posture_modal, seed003_prediction, gap_seed003)
 
 
 def errors(f, z, th, configs):
@@ -92,7 +96,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
                "robots": {}}
     fig, axes = plt.subplots(2, 2, figsize=(11, 8))
     for row, rel in enumerate(cfg["robots"]):
-        rob = jflex.Seed003Robot.from_config(ROOT / "configs" / rel)
+        rob = MachiningRobot.from_config(ROOT / "configs" / rel)
         th = rob.thesis
         start, how = rob.configured_model(rob.K * cfg.get("start_factor", 1.0), rob.C * cfg.get("start_factor", 1.0))
         spec = idf.ParameterSpec([idf.Free("K_N_m_per_rad", lambda m: m.effects[0].stiffness, transform=idf.Log()),

@@ -78,11 +78,13 @@ class PostureModalConfig(_Strict):
     lobes: LobesConfig
 
 
-# the thesis' robots (DH, base parameters, flexible joints, EMA postures) live in the library
-Seed003Robot = jflex.Seed003Robot
+# the thesis' robots (DH, base parameters, flexible joints, EMA postures): a sibling module of the
+# experiments (their folder is no package in a checkout)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from _machining_robot import MachiningRobot  # noqa: E402
 
 
-def modal_table(rob: Seed003Robot, model, hold, frame):
+def modal_table(rob: MachiningRobot, model, hold, frame):
     """Modes at the thesis postures, ordered like the thesis rows: configuration 1 sorted by
     frequency (as in Tables 4.5/4.6), the others paired with configuration 1's mode shapes
     (:func:`jflex.linear.pair_modes`: MAC first, frequency as the tie-break), as the tables label
@@ -205,7 +207,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     models, robs, frf_cache = {}, {}, {}
     for rel in cfg["robots"]:
         path = cfg_root / rel
-        rob = Seed003Robot(jflex.load_yaml(path), path.parent)
+        rob = MachiningRobot(jflex.load_yaml(path), path.parent)
         model, how = rob.configured_model()
         ratios = np.asarray(model.effects[0].gear_ratio)
         models[rob.name], robs[rob.name] = model, rob

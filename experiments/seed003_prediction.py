@@ -17,7 +17,7 @@ The thesis fitted joint K and C0 by hand on configuration 1 and predicted config
    figure, with the singular values of each fit's Jacobian (what so few modes can identify).
 
 Rows are paired as the thesis pairs them, by shape likeness to configuration 1
-(``Seed003Robot.row_order``: :func:`jflex.linear.pair_modes`); held-out errors with the pairing by
+(``MachiningRobot.row_order``: :func:`jflex.linear.pair_modes`); held-out errors with the pairing by
 nearest frequency (the diagnosis' rule) are reported beside.
 
     python experiments/seed003_prediction.py [configs/seed003_prediction.yaml] [--out DIR]
@@ -40,6 +40,10 @@ from scipy.optimize import linear_sum_assignment
 
 import jflex
 from jflex import identify as idf
+
+# the thesis' robots: a sibling module of the experiments (their folder is no package in a checkout)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from _machining_robot import MachiningRobot  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "seed003_prediction.yaml"
@@ -211,7 +215,7 @@ def table(rob, extra):
 
 def rows_of(rob, v: Variant, f_rows1):
     """Model-mode index per configuration and table row (3, m): configuration 1's rows matched by
-    frequency (the table sorts them so), the others by shape (Seed003Robot.row_order)."""
+    frequency (the table sorts them so), the others by shape (MachiningRobot.row_order)."""
     f1 = np.asarray(jflex.modal_analysis(v.model, v.postures[0], hold=v.hold).frequency)
     m = len(f_rows1)
     if len(f1) < m:  # a model without a mode for the extra rows: they are dropped by the caller
@@ -283,7 +287,7 @@ def evaluate(rob, v: Variant, extra, train, cfg):
 
 def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     hold = cfg.get("hold", "actuated")
-    results = {"hold": hold, "row_pairing": "by shape likeness to configuration 1 (Seed003Robot.row_order, "
+    results = {"hold": hold, "row_pairing": "by shape likeness to configuration 1 (MachiningRobot.row_order, "
                "jflex.linear.pair_modes: 1 - MAC + 0.1 x relative frequency distance, Hungarian); configuration 1's rows by frequency",
                "averaging": "held-out: mean over every table row (3 modes) of every configuration not fitted; "
                             "all rows: over the 9 rows of the table",
@@ -299,7 +303,7 @@ def run(cfg: dict, run_dir: pathlib.Path) -> dict:
     fig, axes = plt.subplots(1, len(cfg["robots"]), figsize=(6.5 * len(cfg["robots"]), 4.6), squeeze=False)
     for ax, entry in zip(axes[0], cfg["robots"]):
         path = ROOT / "configs" / entry["config"]
-        rob = jflex.Seed003Robot.from_config(path)
+        rob = MachiningRobot.from_config(path)
         base, how = rob.configured_model()
         tab = TABLE[rob.name]
         ef_th, ez_th = thesis_rows(rob)

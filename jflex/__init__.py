@@ -13,7 +13,7 @@ import os as _os
 import typing as _typing
 
 # XLA:CPU's new fusion emitters recompute shared subexpressions of long elementwise graphs
-# (the rigid-body kernels, MuJoCo MJX) and run them up to 1000x slower (see DESIGN.md and
+# (the rigid-body kernels, MuJoCo MJX) and run them up to 1000x slower (measured in
 # benchmarks/bench_dynamics.py). The legacy emitters do not. The flag only takes effect if set
 # before JAX starts its CPU backend; JFLEX_XLA_FLAGS=0 leaves XLA_FLAGS untouched. jaxlib 0.11
 # no longer has the flag, and XLA aborts the process on a flag it does not know (seen with
@@ -96,11 +96,6 @@ _LAZY_MODULES = {
 _LAZY = {name: (mod, name) for mod, names in _LAZY_MODULES.items() for name in names}
 # subpackages: effects, linear/FRF, FEM, identification, sim-to-real gap diagnosis
 _LAZY.update({name: ("." + name, "") for name in ("effects", "linear", "fem", "identify", "gap")})
-_LAZY.update({
-    "seed003_appendix_b_columns": ("._seed003", "appendix_b_columns"),
-    "seed003_realisation_matrix": ("._seed003", "realisation_matrix"),
-    "Seed003Robot": ("._seed003", "Seed003Robot"),
-})
 
 __all__ = sorted(
     ["ConfigError", "DataError", "JFlexError", "ParameterError", "ShapeError", "SolverError", "URDFError"]
@@ -144,9 +139,6 @@ if _typing.TYPE_CHECKING:  # static tools see the eager imports
     )
     from ._robot import Robot, check_inertia, make_robot
     from ._runs import experiment_cli, load_yaml, make_run_dir, write_results
-    from ._seed003 import Seed003Robot
-    from ._seed003 import appendix_b_columns as seed003_appendix_b_columns
-    from ._seed003 import realisation_matrix as seed003_realisation_matrix
     from ._simulate import Response, simulate, total_energy
     from ._sweep import batched, sweep
     from ._urdf import from_urdf_string, load_urdf

@@ -17,6 +17,10 @@ import jflex
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
+# the thesis' robot model is a sibling module of the experiments that use it
+sys.path.insert(0, str(ROOT / "experiments"))
+from _machining_robot import MachiningRobot  # noqa: E402
+
 
 def _experiment(name):
     spec = importlib.util.spec_from_file_location(f"_exp_{name}", ROOT / "experiments" / f"{name}.py")
@@ -77,7 +81,7 @@ def test_prediction_kc_refit_pairs_rows_by_shape(kr90_run):
     f = np.asarray(m["frequency_Hz"])
     # seed 003 Table 4.6, configuration 1, Exp. column, rows 1-3
     np.testing.assert_allclose(f[0], [10.0, 11.0, 23.7], rtol=0.01)
-    rob = jflex.Seed003Robot.from_config(ROOT / "configs" / "seed003" / "kuka_kr90.yaml")
+    rob = MachiningRobot.from_config(ROOT / "configs" / "seed003" / "kuka_kr90.yaml")
     model = rob.configured_model(np.asarray(m["values"]["K_N_m_per_rad"]), np.asarray(m["values"]["C_N_m_s_per_rad"]))[0]
     shapes = [np.asarray(jflex.modal_analysis(model, q, hold="actuated").shape) for q in rob.postures]
     idx = np.asarray(m["mode_index"])

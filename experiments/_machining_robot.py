@@ -1,5 +1,8 @@
 """Rigid dynamics of two machining robots in terms of their identified base parameters, as the
 MASc thesis "Posture Dependent Dynamics in Robotic Machining" gives them (its Appendix B; "the thesis" below).
+The model the posture_modal, identify_seed003, seed003_prediction and gap_seed003 experiments share
+(a sibling module of theirs, not part of the jflex library: it is loaded by path, the experiment
+folder being no package when run from a checkout).
 
 The thesis gives M(q) and G(q) of the Staubli TX200 and Kuka KR90 (3 positioning joints) as a
 regressor ``Phi(q, qdd)`` times 15 base parameters. ``realisation_matrix`` finds link inertial
@@ -13,8 +16,8 @@ import pathlib
 
 import numpy as np
 
-from ._dynamics import regressor
-from ._sweep import sweep
+from jflex._dynamics import regressor
+from jflex._sweep import sweep
 
 G0 = -9.81  # Appendix B writes gravity torques with g = -9.81 (z up): -g cos(q2) psi_3 > 0
 
@@ -75,7 +78,7 @@ def realisation_matrix(robot, a1, a2, n_samples=60, seed=0):
     return R, rel
 
 
-class Seed003Robot:
+class MachiningRobot:
     """One robot of the thesis (Staubli TX200 or Kuka KR90, 3 positioning joints) as the thesis models
     it: DH kinematics, rigid dynamics from the 27 identified base parameters (Tables 3.3/3.6),
     flexible joints with the stiffness and damping of Tables 4.3/4.4, rotors, the gravity
@@ -92,8 +95,8 @@ class Seed003Robot:
     """
 
     def __init__(self, cfg: dict, cfg_dir):
-        from ._config import load_robot
-        from ._errors import ConfigError
+        from jflex._config import load_robot
+        from jflex._errors import ConfigError
 
         cfg_dir = pathlib.Path(cfg_dir)
         self.cfg = cfg
@@ -113,8 +116,8 @@ class Seed003Robot:
         self.thesis = {k: np.asarray(v, dtype=float) if isinstance(v, list) else v for k, v in cfg["thesis"].items()}
 
     @classmethod
-    def from_config(cls, path) -> "Seed003Robot":
-        from ._runs import load_yaml
+    def from_config(cls, path) -> "MachiningRobot":
+        from jflex._runs import load_yaml
 
         path = pathlib.Path(path)
         return cls(load_yaml(path), path.parent)
@@ -126,8 +129,8 @@ class Seed003Robot:
         ``reflected_inertia`` (3,) [kg m^2], if given, sets each joint's ``r_i^2 I_m,i`` directly
         (rotor ``I_m,i = J_i / r_i^2``) instead of the thesis' rule ``I_m,i = (r_i / r_3) I_m,3``.
         """
-        from . import effects
-        from ._model import Model
+        from jflex import effects
+        from jflex._model import Model
 
         r1, r2, r3 = r[0], r[1], r[2]
         if reflected_inertia is None:
@@ -171,7 +174,7 @@ class Seed003Robot:
         """The model the config's ``gear_ratios`` entry describes, and a sentence saying how:
         ``mode: per_joint_reflected`` uses its ``reflected_inertia_kg_m2``; ``fit_common`` fits one
         ratio (:meth:`fit_common_ratio`); ``given`` takes ``values``."""
-        from ._errors import ConfigError
+        from jflex._errors import ConfigError
 
         gr = self.cfg.get("gear_ratios", {"mode": "fit_common"})
         mode = gr.get("mode", "fit_common")
@@ -198,9 +201,9 @@ class Seed003Robot:
         :class:`jflex.ParameterError` if no ratio within ``bounds`` does."""
         import jax.numpy as jnp
 
-        from ._errors import ParameterError
-        from .linear import linearization, modes
-        from .linear._common import mass_ok
+        from jflex._errors import ParameterError
+        from jflex.linear import linearization, modes
+        from jflex.linear._common import mass_ok
 
         target = np.sort(self.thesis["frequency_model_Hz"][posture])
         q = self.postures[posture]
@@ -230,7 +233,7 @@ class Seed003Robot:
         import jax
         import scipy.optimize as so
 
-        from .linear import modal_analysis
+        from jflex.linear import modal_analysis
 
         target = np.sort(self.thesis["frequency_model_Hz"][posture])
         q = self.postures[posture]
@@ -255,7 +258,7 @@ class Seed003Robot:
         :class:`jflex.linear.Modes` of all postures, batched)."""
         import jax
 
-        from .linear import modal_analysis, pair_modes
+        from jflex.linear import modal_analysis, pair_modes
 
         postures = self.postures if postures is None else np.asarray(postures)
         modes = jax.vmap(lambda q: modal_analysis(model, q, hold=hold, frame=frame))(postures)
