@@ -1,12 +1,25 @@
-"""`jflex gap-bench`: its --help says what each --size runs (checked against the plan), and without
-mujoco installed the MuJoCo family is skipped with one line instead of a ModuleNotFoundError."""
+"""`python benchmarks/bench_gap.py`: its --help says what each --size runs (checked against the
+plan), `jflex` itself has no bench subcommand (the wheel lacks the generators), and without mujoco
+installed the MuJoCo family is skipped with one line instead of a ModuleNotFoundError."""
 
 import collections
+import importlib.util
+import pathlib
 import re
 import sys
 
+import pytest
+
 from jflex_family import bench as _bench
-from jflex.gap._cli import BENCH_SIZES
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def _bench_script():
+    spec = importlib.util.spec_from_file_location("_bench_gap_script", ROOT / "benchmarks" / "bench_gap.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def _counts(size):
@@ -20,7 +33,8 @@ def _counts(size):
 def test_help_states_what_each_size_runs():
     n_full, full = _counts("full")
     n_small, small = _counts("small")
-    text = " ".join(BENCH_SIZES.split())
+    script = _bench_script()
+    text = " ".join(script.SIZES.split())
     assert f"--size full (the default) runs {n_full} cases" in text
     assert f"8 torque-side effects on 3 robots (arm3, planar2, arm4: {full['torque', 'one']})" in text
     assert f"{full['mujoco', 'one']} MuJoCo-simulated" in text and f"{full['torque', 'pair']} effect pairs" in text
@@ -29,11 +43,17 @@ def test_help_states_what_each_size_runs():
     assert f"{nulls} null cases ({full['torque', 'null']} torque, {full['frf', 'null']} FRF)" in text
     assert f"--size small runs {n_small}: the {small['torque', 'one']} torque-side effects, the {small['mujoco', 'one']} MuJoCo" in text
     assert f"{small['torque', 'pair']} pair and {small['frf', 'one']} FRF-side effect on arm3, and {small['torque', 'null']} null" in text
+    helptext = script.build_parser().format_help()
+    assert re.search(rf"full \(the default\): {n_full} cases; small: {n_small}", " ".join(helptext.split()))
+
+
+def test_jflex_has_no_bench_subcommand():
     from jflex.cli import build_parser
 
-    sub = next(a for a in build_parser()._subparsers._group_actions if a.choices and "gap-bench" in a.choices)
-    helptext = sub.choices["gap-bench"].format_help()
-    assert re.search(rf"full \(the default\): {n_full} cases; small: {n_small}", " ".join(helptext.split()))
+    sub = next(a for a in build_parser()._subparsers._group_actions if a.choices)
+    assert "diagnose" in sub.choices and "gap-bench" not in sub.choices
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["gap-bench"])
 
 
 def test_without_mujoco_the_family_is_skipped_in_one_line(monkeypatch):

@@ -1,5 +1,6 @@
-"""``jflex diagnose``, ``jflex case init`` and ``jflex gap-bench`` subcommands (added to the
-``jflex`` parser)."""
+"""``jflex diagnose`` and ``jflex case init`` subcommands (added to the ``jflex`` parser). The
+withheld-effect bench of the diagnosis is no subcommand: its case generators live in a source
+checkout's benchmarks/ (``python benchmarks/bench_gap.py``), which the wheel does not hold."""
 
 from __future__ import annotations
 
@@ -50,48 +51,8 @@ def _case_init(args) -> int:
     return 0
 
 
-def _bench_module():
-    """The jflex-family bench lives outside the package (``benchmarks/gap/jflex_family`` of a
-    source checkout): the library never imports its generator."""
-    import importlib
-    import pathlib
-    import sys
-
-    root = pathlib.Path(__file__).resolve().parents[2] / "benchmarks" / "gap"
-    if not (root / "jflex_family" / "bench.py").is_file():
-        from .._errors import ConfigError
-
-        raise ConfigError(f"jflex gap-bench runs the bench of a source checkout (benchmarks/gap/jflex_family); "
-                          f"not found under {root.parent.parent}: clone the repository and pip install -e it")
-    if str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    return importlib.import_module("jflex_family.bench")
-
-
-def _bench(args) -> int:
-    run_bench = _bench_module().run_bench
-
-    run_dir = make_run_dir("gap-bench", args.out)
-    s = run_bench(run_dir, size=args.size, limit=args.limit, progress=True)
-    print(f"top-1 {s['top1']:.0%}, top-2 {s['top2']:.0%}, median shrink {s['median_shrink']:.0f} %, "
-          f"false alarms {s['false_alarm_rate'] if s['false_alarm_rate'] is None else format(s['false_alarm_rate'], '.0%')}; "
-          f"table: {run_dir / 'bench.md'}")
-    return 0
-
-
-# what each --size runs (benchmarks/gap/jflex_family/bench.py plan; tests/test_gap_bench_cli.py keeps the counts honest)
-BENCH_SIZES = (
-    "Withheld-effect bench of the gap diagnosis: cases are generated with hidden effects, diagnosed "
-    "without them, and scored. --size full (the default) runs 44 cases: 8 torque-side effects on 3 robots "
-    "(arm3, planar2, arm4: 24), 4 MuJoCo-simulated (arm3), 4 effect pairs, 6 FRF-side effects, and 6 null "
-    "cases (4 torque, 2 FRF). --size small runs 16: the 8 torque-side effects, the 4 MuJoCo cases, 1 pair "
-    "and 1 FRF-side effect on arm3, and 2 null cases (arm3, planar2). Without mujoco installed the MuJoCo "
-    "cases are skipped with a note. Reruns into the same --out resume."
-)
-
-
 def add_subcommands(sub) -> None:
-    """Add ``diagnose`` and ``gap-bench`` to the ``jflex`` subparsers."""
+    """Add ``diagnose`` and ``case init`` to the ``jflex`` subparsers."""
     p = sub.add_parser("diagnose", help="sim-to-real gap diagnosis of a case folder (case.yaml)")
     p.add_argument("case", help="case folder or its case.yaml (format: docs/case_format.md)")
     p.add_argument("--out", default=None, help="run folder (default: a fresh runs/diagnose-<time>)")
@@ -113,9 +74,3 @@ def add_subcommands(sub) -> None:
     ci.add_argument("--rate", type=float, default=None, metavar="HZ",
                     help="the sample rate of logs without a time column (row k at k / HZ seconds)")
     ci.set_defaults(fn=_case_init)
-    b = sub.add_parser("gap-bench", help="withheld-effect bench of the gap diagnosis", description=BENCH_SIZES)
-    b.add_argument("--size", choices=("small", "full"), default="full",
-                   help="full (the default): 44 cases; small: 16 (the CI size); see above")
-    b.add_argument("--limit", type=int, default=None, help="run only the first N cases")
-    b.add_argument("--out", default=None, help="run folder (default: a fresh runs/gap-bench-<time>); reruns resume")
-    b.set_defaults(fn=_bench)

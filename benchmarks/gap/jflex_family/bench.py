@@ -1,4 +1,4 @@
-"""``jflex gap-bench``: cases whose true effects are withheld from the diagnosis, then scored.
+"""Withheld-effect bench: cases whose true effects are withheld from the diagnosis, then scored.
 
 Layout of a bench run folder: ``cases/<id>/`` (what the diagnosis sees), ``truths/<id>.json``
 (read only by the scorer, after the diagnosis), ``results/<id>.json`` (written as each case
