@@ -314,8 +314,9 @@ def barrier(*objs, fence=None):
     """Pass V3/M33/Inertia/scalars through ``lax.optimization_barrier``.
 
     XLA's loop fusion duplicates cheap elementwise producers into every consumer; on one long
-    elementwise graph (the whole tree) that recomputation grows without bound (the MJX pitfall
-    in DESIGN.md). A barrier per body keeps fusions to one body's worth of work.
+    elementwise graph (the whole tree) that recomputation grows without bound (MuJoCo MJX's
+    kernels meet the same; benchmarks/bench_dynamics.py measures it). A barrier per body keeps
+    fusions to one body's worth of work.
 
     ``fence`` (an unbatched boolean, false at run time; see ``_tree.consts``): pass the values
     through ``lax.cond(fence, NaN, identity)`` instead. XLA:CPU removes optimization barriers

@@ -325,13 +325,14 @@ def build_parser() -> argparse.ArgumentParser:
     pd.set_defaults(fn=cmd_demo)
     pr = sub.add_parser(
         "run", help="run an experiment script from experiments/ (--list: what each does)",
-        description="Run experiments/<EXPERIMENT>.py; the arguments after its name go to the script "
-        "(each takes [CONFIG] [--out DIR]).", epilog="experiments:\n" + _experiment_table(),
+        description="Run experiments/<EXPERIMENT>.py; the arguments after its name go to the script.\n"
+        "Each takes [CONFIG] [--out DIR] [--quick]; --quick is a small run on the experiment's quick config\n"
+        "that checks its key figures (e.g. jflex run posture_modal --quick).", epilog="experiments:\n" + _experiment_table(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     pr.add_argument("--list", action="store_true", help="list the experiments, one line each, and exit")
     pr.add_argument("experiment", nargs="?", default=None, help="name of a script in experiments/")
-    pr.add_argument("rest", nargs=argparse.REMAINDER, help="arguments passed to the script")
+    pr.add_argument("rest", nargs=argparse.REMAINDER, help="arguments passed to the script: [CONFIG] [--out DIR] [--quick]")
     pr.set_defaults(fn=cmd_run)
     # Subsystems register their own subcommands: each module exposes add_subcommands(sub),
     # whose parsers set ``fn`` like the ones above.
