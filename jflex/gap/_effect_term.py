@@ -261,7 +261,7 @@ def family(robot, name: str) -> Family:
         per = lambda j: [4 * j, 4 * j + 2, 4 * j + 1, 4 * j + 3]
     elif name == PAYLOAD:
         effs = [E.Payload(np.ones(10))]
-        free = (Free("payload", _leaf("parameters")),)
+        free = (Free(PAYLOAD, _leaf("parameters")),)
         per = lambda j: list(range(10))
     else:
         raise KeyError(name)

@@ -49,7 +49,7 @@ def backlash_torque(s: TorqueSet, j: int, h) -> np.ndarray:
     smoothed over each width of :data:`BACKLASH_PULSES`: the contact's stiffness and damping (how
     hard the teeth meet) set the impulse's shape, unknown, so it is a non-negative mixture."""
     b, tau_e = backlash_hyper(h)
-    key = ("backlash", j, b, tau_e)
+    key = (BACKLASH, j, b, tau_e)
     if key not in s.cache:
         ql, qdl = s.q.copy(), s.qd.copy()
         ql[:, j] = first_order_zero_phase(play(s.q[:, j], b), s.t, tau_e)
