@@ -1,5 +1,6 @@
-"""Seed 003's Appendix-B regressor (the thesis' own M(q), G(q) in base parameters) is reproduced by
-jflex's rigid-body regressor on the Table 2.2/2.3 kinematics: an independent check of both."""
+"""The Appendix-B regressor of the MASc thesis "Posture Dependent Dynamics in Robotic Machining"
+(the thesis' own M(q), G(q) in base parameters) is reproduced by jflex's rigid-body regressor on
+the Table 2.2/2.3 kinematics: an independent check of both."""
 
 import pathlib
 import sys

@@ -1,5 +1,6 @@
-"""Seed 003: jflex's flexible-joint models of the Staubli TX200 and Kuka KR90 against the thesis'
-own Model columns (Tables 4.5 and 4.6), and mode pairing that survives close modes.
+"""jflex's flexible-joint models of the Staubli TX200 and Kuka KR90 of the MASc thesis "Posture
+Dependent Dynamics in Robotic Machining" against the thesis' own Model columns (Tables 4.5 and
+4.6), and mode pairing that survives close modes.
 
 The thesis values are typed here from the tables (not read from the configs): the per-joint
 reflected rotor inertias in the configs were fitted to configuration 1 only, so configurations
@@ -22,13 +23,13 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "experiments"))
 from _machining_robot import MachiningRobot  # noqa: E402
 
-TOL_PCT = 1.0  # issue 17: every mode within 1 % of the thesis' Model column
+TOL_PCT = 1.0  # every mode within 1 % of the thesis' Model column
 
 # Model column f_r [Hz], rows in the tables' order (by mode shape), per configuration.
 THESIS_MODEL_HZ = {
-    # seed 003 Table 4.5 (Staubli TX200), "Model" column, configurations 1-3, rows 1-3 each
+    # the thesis' Table 4.5 (Staubli TX200), "Model" column, configurations 1-3, rows 1-3 each
     "staubli_tx200": [[9.236, 12.48, 24.03], [7.46, 11.17, 29.19], [8.09, 11.96, 25.42]],
-    # seed 003 Table 4.6 (Kuka KR90), "Model" column, configurations 1-3, rows 1-3 each: in
+    # the thesis' Table 4.6 (Kuka KR90), "Model" column, configurations 1-3, rows 1-3 each: in
     # configurations 2 and 3 row 1 (14.6, 14.2 Hz) lies above row 2 (10.9, 13 Hz), the shape of
     # configuration 1's first mode having moved above its second
     "kuka_kr90": [[10.0, 11.0, 23.7], [14.6, 10.9, 23.7], [14.2, 13.0, 21.7]],
@@ -61,7 +62,7 @@ def test_model_columns_within_one_percent(robot_modes):
 
 def test_kuka_close_modes_not_swapped():
     """KR90 configurations 2-3: pairing with configuration 1's shapes puts the ~14 Hz mode in row
-    1, as Table 4.6 does; pairing by frequency order (or step-wise path tracking, issue 17) put the
+    1, as Table 4.6 does; pairing by frequency order (or step-wise path tracking) put the
     ~11 Hz mode there, 26 % off the thesis row."""
     rob, f, shapes = _modes("kuka_kr90")
     for k in (1, 2):

@@ -1,5 +1,5 @@
-"""experiments/seed003_prediction.py (issue 17) on a small setting, and the schemas of the seed-003
-experiments it shares its model with (identify_seed003, seed003_prediction)."""
+"""experiments/seed003_prediction.py on a small setting, and the schemas of the experiments that
+share its model of the thesis' robots (identify_seed003, seed003_prediction)."""
 
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ def test_prediction_kc_refit_pairs_rows_by_shape(kr90_run):
     sp = out["splits"][0]
     m = sp["models"]["K,C refit"]
     f = np.asarray(m["frequency_Hz"])
-    # seed 003 Table 4.6, configuration 1, Exp. column, rows 1-3
+    # the thesis' Table 4.6, configuration 1, Exp. column, rows 1-3
     np.testing.assert_allclose(f[0], [10.0, 11.0, 23.7], rtol=0.01)
     rob = MachiningRobot.from_config(ROOT / "configs" / "seed003" / "kuka_kr90.yaml")
     model = rob.configured_model(np.asarray(m["values"]["K_N_m_per_rad"]), np.asarray(m["values"]["C_N_m_s_per_rad"]))[0]
