@@ -490,7 +490,7 @@ def test_frf_noise_floor_of_averaged_repeats(tmp_path):
     case = load_case(folder)
     pb = Problem(case)
     ev = pb.evaluate(pb.nominal_state())
-    fl = noise_floor(pb, ev, case)
+    fl = noise_floor(pb, ev, case).per_dataset
     assert all(0.4 < v < 0.8 for v in fl.values()), fl
 
 
@@ -503,7 +503,7 @@ def _candidate_shrinks(folder, cands) -> dict:
     pb = Problem(case)
     nom = pb.nominal_state()
     ev0 = pb.evaluate(nom)
-    floor = noise_floor(pb, ev0, case)
+    floor = noise_floor(pb, ev0, case).per_dataset
     exc0 = gap_summary(ev0, floor)[2]
     return {c: 100 * (1 - gap_summary(pb.evaluate(pb.add(nom, c)), floor)[2] / exc0) for c in cands}
 

@@ -8,7 +8,7 @@ import pytest
 from scipy.stats import f as fdist
 
 from jflex.gap import FAMILY_ALPHA, SIGNIFICANCE, gap_uncertainty, significance_factor, worse_channels
-from jflex.gap.judge._noise import effective_samples
+from jflex.gap.judge._periodic import effective_samples
 from jflex.gap.judge._selection import DOF_SHARE, _beyond
 from jflex.gap.torque._terms import nearest_rigid_body, payload_implausible
 

@@ -68,7 +68,7 @@ def test_a_dead_channel_is_left_out_and_named(case):
     st = State(T.fit_terms((), 0.0, pb.ttrain), None, None)
     ev = pb.evaluate(st)
     assert names[2] not in ev[v]["channels"] and set(ev[v]["weights"]) == set(names[:2])
-    floor = noise_floor(pb, ev, pb.case)
+    floor = noise_floor(pb, ev, pb.case).per_dataset
     assert all(w["channel"] != names[2] for w in where(pb, ev, floor, pb.case))
 
 
@@ -117,7 +117,7 @@ def test_a_failed_floor_gives_no_confident_verdict(case):
     s = pb.tval[0]
     ev = {s.name: dict(kind="torque", nrmse=3.0, channels={n: 3.0 for n in pb.names}, neff=100.0,
                        resid=np.zeros_like(s.tau))}
-    det = {}
-    fl = noise_floor(pb, ev, case, {}, det)
+    nf = noise_floor(pb, ev, case)
+    fl, det = nf.per_dataset, nf.details
     assert det[s.name]["failed"] and "zero" in det[s.name]["reason"] and fl[s.name] == 0.0
     assert verdict(True, False, True, 100.0, floor_known=False) == "floor_unknown"

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from jflex.gap import MIN_NAMED_SHRINK, find_period, forward_select, worse_channels
-from jflex.gap.judge._noise import black_box_noise, periodic_noise
+from jflex.gap.judge._black_box import black_box_noise
+from jflex.gap.judge._periodic import periodic_noise
 from jflex.gap._problem import pooled_gap
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
@@ -280,7 +281,7 @@ def test_a_channel_no_model_predicts_is_flagged_and_named_when_far_above_its_nei
     # joint 3's residual rings at 3.1 Hz with a phase of its own (no function of the motion):
     # its black-box bound is its own residual, flagged; the diagnosis names it when its gap is far
     # above the noise the other joints show, and only then
-    from jflex.gap._diagnose import _unpredicted
+    from jflex.gap._verdict import unpredicted as _unpredicted
 
     # (over one period alone, time, and so any ringing, is a function of the motion)
     t, q, qd, qdd, F0 = _non_repeating_motion()

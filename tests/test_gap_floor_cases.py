@@ -24,8 +24,7 @@ def test_periodic_log_floor_within_20_percent_of_the_true_noise(tmp_path):
     pb = Problem(case)
     s = pb.tval[0]
     ev = {s.name: dict(kind="torque", nrmse=1.0, channels={}, neff=1.0, resid=np.zeros_like(s.tau))}
-    det = {}
-    noise_floor(pb, ev, case, {}, det)
+    det = noise_floor(pb, ev, case).details
     d = det[s.name]
     assert "scatter between periods" in d["method"] and not d["failed"]
     # the white noise the generator added, through the data's own low-pass (parallel filtering):

@@ -21,7 +21,8 @@ from scipy.signal import butter, sosfiltfilt
 
 import jflex
 from jflex.gap._inertia import PARAM_NAMES, link_moves
-from jflex.gap.judge._noise import noise_floor, periodic_noise
+from jflex.gap.judge._noise import noise_floor
+from jflex.gap.judge._periodic import periodic_noise
 from jflex.gap._problem import Problem
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "gap"))
@@ -199,8 +200,7 @@ def periodic(tmp_path_factory):
     twin = jflex.gap.load_case(_periodic_case(base / "exact", False)[0])
     pb = Problem(twin)
     ev = pb.evaluate(pb.nominal_state())
-    det = {}
-    noise_floor(pb, ev, twin, {}, det)
+    det = noise_floor(pb, ev, twin).details
     case = jflex.gap.load_case(folder)
     s = Problem(case).tval[0]
     cutoff = float(s.processing["cutoff_hz"])

@@ -83,7 +83,7 @@ def test_cad_error_on_tip_records_lies_within_the_cad_spread(tmp_path):
     first-order spread of the CAD tolerance (``._response.cad_spread``, reported as ``cad_spread``
     when nothing explains a gap) covers it."""
     from independent import cases as C
-    from jflex.gap._diagnose import _cad_spread
+    from jflex.gap._cad import tolerance_spread as _cad_spread
 
     C.tip_case(tmp_path / "null", "arm3", (), 9103, cad_error=True)
     pb = Problem(load_case(tmp_path / "null"))

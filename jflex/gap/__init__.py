@@ -3,9 +3,11 @@ how far it shrinks once that effect is added and refitted, judged on held-out da
 
 from .case._case import Case as Case, Dataset as Dataset, EFFECT_NAMES as EFFECT_NAMES, load_case as load_case
 from .case._init import case_init as case_init
-from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose
+from ._diagnose import diagnose as diagnose
+from ._result import Diagnosis as Diagnosis
 from ._effect_term import EffectCandidate as EffectCandidate
-from .judge._noise import find_period as find_period, noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
+from .judge._noise import NoiseFloor as NoiseFloor, noise_floor as noise_floor, repeats_factor as repeats_factor, robust_sigma as robust_sigma
+from .judge._periodic import find_period as find_period
 from .judge._selection import (
     EXPLAINED_FLOOR_FACTOR as EXPLAINED_FLOOR_FACTOR,
     EXPLAINED_SHRINK as EXPLAINED_SHRINK,

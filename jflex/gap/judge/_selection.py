@@ -9,6 +9,8 @@ import dataclasses
 
 import numpy as np
 
+from ...effects._registry import NESTED  # complex -> the simpler effect it contains
+
 SIGNIFICANCE = 1.2  # a gap is significant when nrmse > 1.2 x its noise floor (+ MIN_GAP)
 MIN_GAP = 0.2  # [%] below this a gap is never significant
 MIN_STEP_SHRINK = 10.0  # [%] of the current excess an added effect must close to be selected
@@ -187,7 +189,6 @@ def ic_delta(ev_new, ev_old, p_new):
     return d + p_new * np.log(max(ntot, 2.0))
 
 
-NESTED = {"stribeck_friction": "coulomb_friction"}  # complex -> the simpler effect it contains
 PARSIMONY = 5.0  # [%] a nested simpler effect within this shrink of the richer one ranks first
 
 
@@ -316,98 +317,141 @@ def forward_select(state0, ev0: dict, floor: dict, candidates, refit, *, n_param
     vetoes = []
     if not (sig_(ev0) if significant is None else significant):
         return _with(vetoes, Selection([], state0, ev0, "not significant"))
-    steps, state, ev_cur, chosen = [], state0, ev0, []
     _, _, exc0 = gap_summary(ev0, floor)
-    weak = None  # (first step, share it had to close) while a decisive but partial first effect is on probation
+    S = _Search(state0, ev0, floor, exc0, vetoes, state=state0, ev=ev0)
     need_of = min_first_shrink if callable(min_first_shrink) else (lambda step: min_first_shrink)
-
-    def on_probation(stop):
-        # the effects taken since a decisive first step that closed too little must close the share
-        # together, else none is named (two real effects each closing part of one gap are named;
-        # a lone partial match to an effect outside the library is not)
-        _, _, exc = gap_summary(ev_cur, floor)
-        closed = 100 * (1 - exc / exc0)
-        if closed >= weak[1]:
-            return _with(vetoes, Selection(steps, state, ev_cur, stop))
-        return _with(vetoes, Selection([], state0, ev0, "weak", weak[0], (tuple(st_.cand for st_ in steps[1:]), float(closed))))
-
     while True:
-        if len(steps) >= max_effects:
-            return _with(vetoes, on_probation("max effects") if weak else Selection(steps, state, ev_cur, "max effects"))
-        _, _, exc_cur = gap_summary(ev_cur, floor)
-        pool = candidates(state, len(steps)) if callable(candidates) else candidates
-        best = None
-        local = None  # the best decisive candidate that resolves some joint on its own (see above)
-        for c in pool:
-            if c in chosen:
-                continue
-            st, ev = first[c] if (first is not None and not steps and c in first) else refit(state, c)
-            why = implausible(c, st) if implausible is not None else None
-            why = f"implausible fit: {why}" if why else vetoed(dict(worse_channels=worse_channels(ev, ev_cur, channel_floor,
-                                                                                                channel_rel)))
-            if why:
-                vetoes.append((len(steps), c, why))
-                continue
-            score = -ic_delta(ev, ev_cur, n_params(c))
-            _, _, exc = gap_summary(ev, floor)
-            step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
-            key = (round(step_shrink), score)
-            if simpler is not None and best is not None:
-                if simpler(best[1].cand, c) and simpler_holds(step_shrink, score, best[1].step_shrink, best[1].score):
-                    key = (best[0][0], best[0][1] + 1e-9, 1)  # the simpler nested effect wins a near tie
-                elif simpler(c, best[1].cand) and simpler_holds(best[1].step_shrink, best[1].score, step_shrink, score):
-                    key = (-np.inf, -np.inf)
-            if best is None or key > best[0]:
-                best = (key, Step(c, st, ev, ev_cur, float(score), float(step_shrink), state))
-            # (one that makes the pooled gap worse by a step's share stands in for something else:
-            # an offset at a Panda's joint 2 "resolved" joint 3 while the pooled excess grew 52 %)
-            if resolved_channels(ev, ev_cur, channel_floor, channel_factor) and step_shrink > -MIN_STEP_SHRINK:
-                jscore = max(score, channel_score(ev, ev_cur, n_params(c)))
-                if jscore >= DECISIVE_SCORE and (local is None or jscore > local[0]):
-                    local = (jscore, Step(c, st, ev, ev_cur, float(score), float(step_shrink), state))
+        if len(S.steps) >= max_effects:
+            return S.end("max effects")
+        _, _, exc_cur = gap_summary(S.ev, floor)
+        pool = candidates(S.state, len(S.steps)) if callable(candidates) else candidates
+        best, local = _round(S, pool, exc_cur, refit, first=first, n_params=n_params, simpler=simpler,
+                             implausible=implausible, channel_floor=channel_floor, channel_rel=channel_rel,
+                             channel_factor=channel_factor)
         if best is None:
-            return _with(vetoes, on_probation("no candidate") if weak else Selection(steps, state, ev_cur, "no candidate"))
-        step = best[1]
-        on_joint = False
-        local = None if local is None else local[1]
-        if (steps and not sig_(ev_cur)) or (not steps and joint_only):
-            # the pooled gap is within noise but a joint is not: only a candidate that resolves a
-            # joint on its own evidence may still be taken
-            if local is None:
-                if not steps:
-                    return _with(vetoes, Selection(steps, state, ev_cur, "joint", step))
-                return _with(vetoes, on_probation("within noise") if weak else Selection(steps, state, ev_cur, "within noise"))
-            step, on_joint = local, True
-        elif local is not None and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK
-                                  or (not steps and step.step_shrink < need_of(step))):
-            step, on_joint = local, True
-        if weak and step.score < DECISIVE_SCORE:
-            return _with(vetoes, on_probation("too small"))
-        if not on_joint and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK):
-            return _with(vetoes, Selection(steps, state, ev_cur, "too small", step))
-        need = need_of(step)
-        if not steps and step.step_shrink < need and not on_joint:
-            if step.score < DECISIVE_SCORE:
-                return _with(vetoes, Selection(steps, state, ev_cur, "weak", step))
-            weak = (step, need)
+            return S.end("no candidate")
+        stop, step, on_joint = _pick(S, best, local, sig_, joint_only, need_of)
+        if stop is not None:
+            return stop
         if refine is not None:
             st_r, ev_r = refine(step)
             step = dataclasses.replace(step, state=st_r, ev=ev_r)
-        steps.append(step)
-        chosen.append(step.cand)
-        state, ev_cur = step.state, step.ev
+        S.steps.append(step)
+        S.chosen.append(step.cand)
+        S.state, S.ev = step.state, step.ev
         new = [step]
-        if weak:
-            _, _, exc = gap_summary(ev_cur, floor)
-            if 100 * (1 - exc / exc0) < weak[1]:
-                if not sig_(ev_cur):
-                    return _with(vetoes, on_probation("within noise"))
+        if S.weak:
+            _, _, exc = gap_summary(S.ev, floor)
+            if 100 * (1 - exc / exc0) < S.weak[1]:
+                if not sig_(S.ev):
+                    return _with(vetoes, S.probation("within noise"))
                 continue
-            weak, new = None, steps
+            S.weak, new = None, S.steps
         for st_ in new if on_select is not None else ():
             on_select(st_)
-        if not sig_(ev_cur) and not joints_beyond_floor(ev_cur, channel_floor, channel_factor):
-            return _with(vetoes, Selection(steps, state, ev_cur, "within noise"))
+        if not sig_(S.ev) and not joints_beyond_floor(S.ev, channel_floor, channel_factor):
+            return _with(vetoes, Selection(S.steps, S.state, S.ev, "within noise"))
+
+
+@dataclasses.dataclass
+class _Search:
+    """A forward selection under way (:func:`forward_select`): the nominal model, its excess
+    ``exc0``, the vetoes so far, the steps taken, the current model and a decisive first effect on
+    probation (``weak``: its step and the share of the excess it had to close)."""
+
+    state0: object
+    ev0: dict
+    floor: dict
+    exc0: float
+    vetoes: list
+    steps: list = dataclasses.field(default_factory=list)
+    state: object = None
+    ev: dict = None
+    chosen: list = dataclasses.field(default_factory=list)
+    weak: tuple | None = None
+
+    def probation(self, stop: str) -> Selection:
+        """The end of a search with a first effect on probation: the effects taken since it must
+        close the share together, else none is named (two real effects each closing part of one gap
+        are named; a lone partial match to an effect outside the library is not)."""
+        _, _, exc = gap_summary(self.ev, self.floor)
+        closed = 100 * (1 - exc / self.exc0)
+        if closed >= self.weak[1]:
+            return _with(self.vetoes, Selection(self.steps, self.state, self.ev, stop))
+        return _with(self.vetoes, Selection([], self.state0, self.ev0, "weak", self.weak[0],
+                                            (tuple(st_.cand for st_ in self.steps[1:]), float(closed))))
+
+    def end(self, stop: str, rejected=None) -> Selection:
+        """The search stopped for ``stop`` (on probation: :meth:`probation`)."""
+        if self.weak:
+            return _with(self.vetoes, self.probation(stop))
+        return _with(self.vetoes, Selection(self.steps, self.state, self.ev, stop, rejected))
+
+
+def _round(S: _Search, pool, exc_cur: float, refit, *, first, n_params, simpler, implausible, channel_floor,
+           channel_rel, channel_factor):
+    """One round of :func:`forward_select`: each candidate of ``pool`` not yet chosen refitted on the
+    current model (the first round's from ``first``) and scored. Returns the best step (by the shrink
+    rounded to a point, then the score; a simpler nested effect wins a near tie) and the best decisive
+    step resolving some joint on its own evidence (or None); vetoes go to ``S.vetoes``."""
+    best = None
+    local = None  # the best decisive candidate that resolves some joint on its own (see forward_select)
+    for c in pool:
+        if c in S.chosen:
+            continue
+        st, ev = first[c] if (first is not None and not S.steps and c in first) else refit(S.state, c)
+        why = implausible(c, st) if implausible is not None else None
+        why = f"implausible fit: {why}" if why else vetoed(dict(worse_channels=worse_channels(ev, S.ev, channel_floor,
+                                                                                            channel_rel)))
+        if why:
+            S.vetoes.append((len(S.steps), c, why))
+            continue
+        score = -ic_delta(ev, S.ev, n_params(c))
+        _, _, exc = gap_summary(ev, S.floor)
+        step_shrink = 100 * (1 - exc / exc_cur) if exc_cur > 0 else 0.0
+        key = (round(step_shrink), score)
+        if simpler is not None and best is not None:
+            if simpler(best[1].cand, c) and simpler_holds(step_shrink, score, best[1].step_shrink, best[1].score):
+                key = (best[0][0], best[0][1] + 1e-9, 1)  # the simpler nested effect wins a near tie
+            elif simpler(c, best[1].cand) and simpler_holds(best[1].step_shrink, best[1].score, step_shrink, score):
+                key = (-np.inf, -np.inf)
+        if best is None or key > best[0]:
+            best = (key, Step(c, st, ev, S.ev, float(score), float(step_shrink), S.state))
+        # (one that makes the pooled gap worse by a step's share stands in for something else:
+        # an offset at a Panda's joint 2 "resolved" joint 3 while the pooled excess grew 52 %)
+        if resolved_channels(ev, S.ev, channel_floor, channel_factor) and step_shrink > -MIN_STEP_SHRINK:
+            jscore = max(score, channel_score(ev, S.ev, n_params(c)))
+            if jscore >= DECISIVE_SCORE and (local is None or jscore > local[0]):
+                local = (jscore, Step(c, st, ev, S.ev, float(score), float(step_shrink), S.state))
+    return (None if best is None else best[1]), (None if local is None else local[1])
+
+
+def _pick(S: _Search, step: Step, local: Step | None, sig_, joint_only: bool, need_of):
+    """Whether the round's best ``step`` (or ``local``, resolving a joint on its own) is taken: ``(selection,
+    None, False)`` when the search stops, else ``(None, step, on_joint)``; ``S.weak`` set on probation."""
+    steps = S.steps
+    on_joint = False
+    if (steps and not sig_(S.ev)) or (not steps and joint_only):
+        # the pooled gap is within noise but a joint is not: only a candidate that resolves a
+        # joint on its own evidence may still be taken
+        if local is None:
+            if not steps:
+                return _with(S.vetoes, Selection(steps, S.state, S.ev, "joint", step)), None, False
+            return S.end("within noise"), None, False
+        step, on_joint = local, True
+    elif local is not None and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK
+                              or (not steps and step.step_shrink < need_of(step))):
+        step, on_joint = local, True
+    if S.weak and step.score < DECISIVE_SCORE:
+        return _with(S.vetoes, S.probation("too small")), None, False
+    if not on_joint and (step.score <= 0 or step.step_shrink < MIN_STEP_SHRINK):
+        return _with(S.vetoes, Selection(steps, S.state, S.ev, "too small", step)), None, False
+    need = need_of(step)
+    if not steps and step.step_shrink < need and not on_joint:
+        if step.score < DECISIVE_SCORE:
+            return _with(S.vetoes, Selection(steps, S.state, S.ev, "weak", step)), None, False
+        S.weak = (step, need)
+    return None, step, on_joint
 
 
 SWAP_SHRINK = 5.0  # [%] alone, an effect at the same place within this of a selected one is its rival

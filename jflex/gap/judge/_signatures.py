@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._problem import Candidate, Problem, State
 from ..torque import _set as T
 from ..frequency._kinds import frequency_kinds
 from ..torque._terms import KINDS, make_term
+from ._view import CandidateView, ProblemView, StateView
 
 
-def n_params(c: Candidate, user=None, torque: bool = True, problem: Problem | None = None) -> int:
+def n_params(c: CandidateView, user=None, torque: bool = True, problem: ProblemView | None = None) -> int:
     """Parameters ``c`` adds (its kind's count, searched hyper-parameters included): the torque
     side's when there are torque data (a payload's 10 inertial parameters), else the frequency
     side's on ``problem``'s training data (a payload's mass and centre of mass on FRFs, its mass on
@@ -27,7 +27,7 @@ def n_params(c: Candidate, user=None, torque: bool = True, problem: Problem | No
     return kind.params(problem) if problem is not None else kind.n_params
 
 
-def signatures(problem: Problem, state: State, cands) -> dict:
+def signatures(problem: ProblemView, state: StateView, cands) -> dict:
     """A cheap score per torque candidate before any refit: the largest |correlation| between the
     training residual and the candidate's columns (sign of velocity for Coulomb, posture harmonics
     for compensators, d tau/dt for a delay, held sign x gravity stiffness for backlash)."""
@@ -60,7 +60,7 @@ def signature_name(effect: str) -> str:
 INDISTINGUISHABLE = 1e-6  # relative residual of a candidate's columns off the inertial columns' span
 
 
-def indistinguishable_from_inertia(problem: Problem, cands) -> dict:
+def indistinguishable_from_inertia(problem: ProblemView, cands) -> dict:
     """Torque candidates whose columns lie in the span of the inertial parameters the nominal
     identification refits (``{candidate: relative residual}``): on these motions they are the same
     torques as a change of the links' inertias (a rotor's inertia regroups with its link's about

@@ -9,12 +9,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..frequency import _model as L
+from ._view import ProblemView
 
 if TYPE_CHECKING:
     from ..case._case import Case
-    from .._problem import Problem
 
-def where(problem: Problem, ev: dict, floor: dict, case: Case, n_windows: int = 8, n_bands: int = 8,
+def where(problem: ProblemView, ev: dict, floor: dict, case: Case, n_windows: int = 8, n_bands: int = 8,
           channel_floor: dict | None = None) -> list:
     """Localise the validation gap: data set x channel, time windows, frequency bands, postures.
     Channels left out of the gap (:attr:`Problem.excluded`) are not listed; ``channel_floor``
