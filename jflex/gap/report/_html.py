@@ -340,16 +340,31 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
          f"<style>{_CSS}</style></head><body>",
          f"<h1>Gap diagnosis of {_e(robot_name)}</h1><p>Case <code>{_e(r['case'])}</code>; "
          f"diagnosis took {r['seconds']:.1f} s. Terms are defined at the <a href='#terms'>end of the page</a>.</p>"]
+    _page_summary(H, r, payload)
+    _page_selected(H, r)
+    _page_model(H, r, nominal_effects, payload)
+    _page_datasets(H, r, out, figures, modal_tables, set_gaps)
+    _page_where(H, r, out, figures)
+    _page_ranking(H, r, out, figures)
+    _sec(H, "terms")
+    H.append("<dl>" + "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in TERMS) + "</dl>")
+    H.append("</body></html>")
+    return "\n".join(H)
 
-    def sec(key):
-        H.append(f"<h2 id='{key}'>{_e(SECTIONS[key])}</h2>")
 
-    def figs(section, dataset=None):
-        for f in figures:
-            if f["section"] == section and f.get("dataset") == dataset:
-                H.append(_figure(out, f))
+def _sec(H: list, key: str) -> None:
+    H.append(f"<h2 id='{key}'>{_e(SECTIONS[key])}</h2>")
 
-    sec("summary")
+
+def _figs(H: list, out: pathlib.Path, figures: list[dict], section: str, dataset=None) -> None:
+    for f in figures:
+        if f["section"] == section and f.get("dataset") == dataset:
+            H.append(_figure(out, f))
+
+
+def _page_summary(H: list, r: dict, payload) -> None:
+    """The verdict, the gap and its floor, the data left out, the candidates never named."""
+    _sec(H, "summary")
     v = r.get("verdict", "")
     H.append(f"<p class='verdict'><b>{_e(v.replace('_', ' '))}</b>: {_e(VERDICTS.get(v, ''))}. "
              f"The search stopped because {_e(r.get('stop_reason', ''))}.</p>")
@@ -363,7 +378,7 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
         H.append(f"<p><b>{_e(payload_line(payload)).capitalize()}.</b></p>")
     notes, ctab = data_notes(r), conditioning_table(r)
     if notes or ctab:
-        sec("data")
+        _sec(H, "data")
         if ctab:
             H.append(_table(CONDITIONING_HEAD, [[_e(c) for c in row] for row in ctab]))
         if notes:
@@ -372,7 +387,10 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
         H.append("<p>Candidates never named: " + "; ".join(
             f"{_e(v['candidate'])} ({_e(v['reason'])})" for v in r["vetoed"][:10]) + ".</p>")
 
-    sec("selected")
+
+def _page_selected(H: list, r: dict) -> None:
+    """The selected effects and the ambiguous pairs."""
+    _sec(H, "selected")
     if r["selected"]:
         rows = []
         for i, s in enumerate(r["selected"]):
@@ -389,7 +407,10 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
                      f"{' (a known confounded pair)' if a['known_pair'] else ''}: more data sets or postures are needed "
                      "to tell them apart.</p>")
 
-    sec("model")
+
+def _page_model(H: list, r: dict, nominal_effects, payload) -> None:
+    """The nominal and final models' parameters and the inertial refit."""
+    _sec(H, "model")
     listed = ", ".join(f"{n['effect']} ({', '.join(n.get('joints') or ()) or 'all joints'})" for n in nominal_effects)
     H.append("<p>Effects marked <span class='tag nominal'>nominal</span> are part of the nominal model: case.yaml's "
              f"<code>nominal_effects</code> ({_e(listed or 'none')}) and, on FRF/modal data, the joint springs. They "
@@ -423,7 +444,10 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
                           "-" if m["mass_change_pct"] is None else f"{m['mass_change_pct']:+.1f}",
                           _num(1e3 * m["com_shift_m"], 1), _e(bound_words(m))] for m in moves]))
 
-    sec("datasets")
+
+def _page_datasets(H: list, r: dict, out: pathlib.Path, figures: list[dict], modal_tables: dict, set_gaps: dict) -> None:
+    """Each validation set's gaps, modal table and figures, then the waterfall of the gap."""
+    _sec(H, "datasets")
     for name, (kind, g0, g1, fl, src) in set_gaps.items():
         H.append(f"<h3>{_e(name)} ({_e(kind)})</h3><p>gap {g0:.2f} % nominal, {g1:.2f} % final; noise floor "
                  f"{fl:.2f} % ({_e(src or 'estimated')}).</p>")
@@ -432,42 +456,49 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
                              "final f [Hz]", "final error [%]"], modal_tables[name]))
             H.append("<p>Each measured mode is matched one-to-one to the nearest model mode in relative frequency; a "
                      "measured mode with no model mode within 10 % is one the model lacks.</p>")
-        figs("datasets", name)
+        _figs(H, out, figures, "datasets", name)
 
-    sec("waterfall")
-    figs("waterfall")
+    _sec(H, "waterfall")
+    _figs(H, out, figures, "waterfall")
     H.append(_table(["step", "validation gap [%]", "excess over noise [%]"],
                     [[_e(s["added"] or "nominal"), _num(s["gap"]), _num(s["excess"])] for s in r["steps"]]))
 
-    sec("where")
+
+def _page_where(H: list, r: dict, out: pathlib.Path, figures: list[dict]) -> None:
+    """Where the nominal model's validation error lies."""
+    _sec(H, "where")
     wh = r.get("where", [])[:20]
     cols = [("data set", "dataset"), ("channel", "channel"), ("window [s]", "window_s"), ("band [Hz]", "band_hz"),
             ("posture", "posture")]
     cols = [c for c in cols if any(w.get(c[1]) is not None for w in wh)]  # only the columns some row fills
-
-    def cell(w, key):
-        x = w.get(key)
-        if x is None:
-            # a row that cuts nothing finer than its channel is the whole record
-            whole = key == cols[2][1] if len(cols) > 2 else False
-            return "whole set" if whole and all(w.get(k) is None for k in ("window_s", "band_hz", "posture")) else ""
-        if key == "window_s":
-            return "%.1f-%.1f" % tuple(x)
-        if key == "band_hz":
-            return "%.2f-%.2f" % tuple(x)
-        if key == "posture" and isinstance(x, dict):
-            if "variable" in x:
-                return f"correlates with {_e(x['variable'])} ({x['corr']:.2f})"
-            return _e(", ".join(f"{k}={v:.0f}" for k, v in x["q_deg"].items()) + " deg")
-        return _e(x)
-
     if wh:
         H.append("<p>The nominal model's validation error cut into pieces (per channel, time window, frequency band or "
                  "posture), largest first: where to look before any effect is added.</p>")
-        H.append(_table([c[0] for c in cols] + ["NRMSE [%]"], [[cell(w, c[1]) for c in cols] + [_num(w["nrmse"])] for w in wh]))
-    figs("where")
+        H.append(_table([c[0] for c in cols] + ["NRMSE [%]"], [[_where_cell(w, c[1], cols) for c in cols] + [_num(w["nrmse"])] for w in wh]))
+    _figs(H, out, figures, "where")
 
-    sec("ranking")
+
+def _where_cell(w, key, cols):
+    """One cell of the table of where the gap lies (``cols``: the columns shown, (title, key))."""
+    x = w.get(key)
+    if x is None:
+        # a row that cuts nothing finer than its channel is the whole record
+        whole = key == cols[2][1] if len(cols) > 2 else False
+        return "whole set" if whole and all(w.get(k) is None for k in ("window_s", "band_hz", "posture")) else ""
+    if key == "window_s":
+        return "%.1f-%.1f" % tuple(x)
+    if key == "band_hz":
+        return "%.2f-%.2f" % tuple(x)
+    if key == "posture" and isinstance(x, dict):
+        if "variable" in x:
+            return f"correlates with {_e(x['variable'])} ({x['corr']:.2f})"
+        return _e(", ".join(f"{k}={v:.0f}" for k, v in x["q_deg"].items()) + " deg")
+    return _e(x)
+
+
+def _page_ranking(H: list, r: dict, out: pathlib.Path, figures: list[dict]) -> None:
+    """The candidates ranked alone, and the other figures."""
+    _sec(H, "ranking")
     H.append("<p>Each candidate added alone to the nominal model, refitted on the training data and scored on the "
              "validation data, best first (by shrink, then score). Candidates are chosen for refitting by their "
              "signature; the selection then adds effects one at a time (see above).</p>")
@@ -481,9 +512,4 @@ def page(r: dict, out: pathlib.Path, figures: list[dict], *, robot_name: str, no
                      _num(s["gap_after"]), f"{s['shrink']:.0f}", _num(s["score"], 1),
                      "" if sg is None else f"{_e(sg['name'])}: {sg['value']:.2f}"])
     H.append(_table(["#", "effect", "gap after [%]", "shrink [%]", "score", "signature"], rows))
-    figs("other")
-
-    sec("terms")
-    H.append("<dl>" + "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in TERMS) + "</dl>")
-    H.append("</body></html>")
-    return "\n".join(H)
+    _figs(H, out, figures, "other")

@@ -40,23 +40,25 @@ def _fig(files, name, caption, section="other", dataset=None):
     files.append(dict(file=name, caption=caption, section=section, dataset=dataset))
 
 
-def _plots(diag, out: pathlib.Path, robot: str, ev0: dict, evf: dict) -> list[dict]:
-    """Every figure of the report: dicts ``file``, ``caption``, ``section``, ``dataset``;
-    ``ev0``, ``evf``: the nominal and final models' evaluations on the validation sets."""
+def _plots(diag, out: pathlib.Path, robot: str) -> list[dict]:
+    """Every figure of the report: dicts ``file``, ``caption``, ``section``, ``dataset``; drawn from
+    the diagnosis' stored series (:class:`jflex.gap._result.ReportSeries`: the nominal and final
+    models' evaluations on the validation sets, the sets themselves)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    pb, r = diag.problem, diag.result
+    S, r = diag.series, diag.result
+    ev0, evf = S.nominal, S.final
     files = []
     # measured vs nominal vs final, per validation set
-    for s in pb.tval:
+    for s in S.torque:
         if s.name in ev0 and s.name in evf:
             taus = [s.tau + ev[s.name]["resid"] * s.scale for ev in (ev0, evf)]
-            name, cap = FG.torque_traces(plt, out, robot, s, pb.names, *taus, (ev0[s.name]["nrmse"], evf[s.name]["nrmse"]))
+            name, cap = FG.torque_traces(plt, out, robot, s, S.names, *taus, (ev0[s.name]["nrmse"], evf[s.name]["nrmse"]))
             _fig(files, name, cap, "datasets", s.name)
-    for d in pb.fval:
+    for d in S.frequency:
         if d.kind == "frf" and d.name in ev0 and d.name in evf:
             name, cap = FG.frf_bode(plt, out, robot, d, ev0[d.name]["Hm"], evf[d.name]["Hm"],
                                     (ev0[d.name]["nrmse"], evf[d.name]["nrmse"]))
@@ -64,14 +66,14 @@ def _plots(diag, out: pathlib.Path, robot: str, ev0: dict, evf: dict) -> list[di
     # residual heat map over time x channel (first torque validation set)
     tv = [k for k, v in ev0.items() if v["kind"] == "torque"]
     if tv:
-        s = next(s for s in pb.tval if s.name == tv[0])
+        s = next(s for s in S.torque if s.name == tv[0])
         e = ev0[tv[0]]["resid"]
         nw = 40
         edges = np.linspace(0, len(s.t), nw + 1).astype(int)
-        Z = np.array([[np.sqrt(np.mean(e[a:b, j] ** 2)) * 100 for a, b in zip(edges[:-1], edges[1:])] for j in range(pb.n)])
-        fig, ax = plt.subplots(figsize=(8, 2 + 0.4 * pb.n))
-        im = ax.imshow(Z, aspect="auto", origin="lower", extent=[s.t[0], s.t[-1], -0.5, pb.n - 0.5], cmap="magma")
-        ax.set_yticks(range(pb.n), pb.names)
+        Z = np.array([[np.sqrt(np.mean(e[a:b, j] ** 2)) * 100 for a, b in zip(edges[:-1], edges[1:])] for j in range(S.n)])
+        fig, ax = plt.subplots(figsize=(8, 2 + 0.4 * S.n))
+        im = ax.imshow(Z, aspect="auto", origin="lower", extent=[s.t[0], s.t[-1], -0.5, S.n - 0.5], cmap="magma")
+        ax.set_yticks(range(S.n), S.names)
         ax.set_xlabel("time [s]")
         ax.set_title(f"{robot}: nominal model's torque error over time, set '{tv[0]}'")
         fig.colorbar(im, ax=ax, label="windowed NRMSE [%]")
@@ -82,8 +84,8 @@ def _plots(diag, out: pathlib.Path, robot: str, ev0: dict, evf: dict) -> list[di
              "(rows) and time window (columns): the RMS error in the window over the joint's torque variation [%]. "
              "A bright row is a joint the model misses; a bright column a part of the motion.", "where")
     # frequency x posture heat map (FRF band errors) and FRF overlays
-    fr = [d for d in pb.fval if d.kind == "frf"]
-    md = [d for d in pb.fval if d.kind == "modal"]
+    fr = [d for d in S.frequency if d.kind == "frf"]
+    md = [d for d in S.frequency if d.kind == "modal"]
     if fr:
         bands = np.geomspace(fr[0].arrays["freq"][0], fr[0].arrays["freq"][-1] * 1.0001, 25)
         Z = []
@@ -133,16 +135,12 @@ def _plots(diag, out: pathlib.Path, robot: str, ev0: dict, evf: dict) -> list[di
 
 def _response_plots(diag, out: pathlib.Path, plt, robot: str) -> list[tuple[str, str, str]]:
     """One figure per output-error (tip) set: measured, nominal and final simulated channels over
-    time (left) and both residuals (right), one row per channel."""
+    time (left) and both residuals (right), one row per channel (the simulations the diagnosis stored)."""
     from ..response import _response as R
 
-    pb = diag.problem
-    if not pb.rval:
-        return []
     files = []
-    models = [("nominal", pb.simulation_model(diag.nominal)), ("final", pb.simulation_model(diag.final))]
-    for s in pb.rval:
-        preds = [(lab, R.predict(m, s)) for lab, m in models]
+    for s in diag.series.responses:
+        preds = [("nominal", s.nominal), ("final", s.final)]
         k = len(s.channels)
         fig, axs = plt.subplots(k, 2, figsize=(11, 2.2 * k + 0.6), squeeze=False, sharex=True)
         for i, ch in enumerate(s.channels):
@@ -176,6 +174,16 @@ def _fmt(x, nd=2):
 
 
 def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None = None, prismatic=()) -> str:
+    """report.md: the summary, the selected effects and their rivals, the candidates ranked alone,
+    where the gap lies, the fitted parameters and the plots (file names ``plots``)."""
+    L = _md_summary(r, robot, payload) + _md_selected(r) + _md_ranking(r) + _md_model(r, plots, payload, prismatic)
+    L += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
+    L.append(f"\n_Diagnosis took {r['seconds']:.1f} s._")
+    return "\n".join(L) + "\n"
+
+
+def _md_summary(r: dict, robot, payload) -> list[str]:
+    """The gap, the noise floor, the data left out, the verdict and the inertial refit."""
     L = [f"# Gap diagnosis{' of ' + robot if robot else ''}: {r['case']}", "",
          "The same report with its figures and the terms explained: [report.html](report.html).", ""]
     L.append(f"**Validation gap:** {r['gap_before']:.2f} % NRMSE before, {r['gap_after']:.2f} % after; noise floor "
@@ -212,6 +220,12 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
         L.append("")
     if payload:
         L += [f"**{_html.payload_line(payload).capitalize()}.**", ""]
+    return L
+
+
+def _md_selected(r: dict) -> list[str]:
+    """The selected effects, those confounded with the inertial refit, ambiguous pairs and rivals."""
+    L = []
     L.append("## Selected effects (in order added)")
     if r["selected"]:
         L += ["| effect | joint / link | gap after [%] | shrink [%] | score |", "|---|---|---|---|---|"]
@@ -247,6 +261,12 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
               "the second closed what the first left:", ""]
         L += [f"- {w['by']} in place of {w['replaced']}: excess over noise {w['excess_before']:.2f} -> "
               f"{w['excess_after']:.2f} %" for w in r["swapped"]]
+    return L
+
+
+def _md_ranking(r: dict) -> list[str]:
+    """The candidates ranked alone, where the gap lies and the gap as effects are added."""
+    L = []
     L += ["", "## Candidate ranking (each added alone to the nominal model)", "",
           "| # | effect | joint / link | gap after [%] | shrink [%] | score | signature |", "|---|---|---|---|---|---|---|"]
     for i, s in enumerate(r["ranking"][:15]):
@@ -277,6 +297,12 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
     L += ["", "## Gap as effects are added", "", "| step | validation gap [%] | excess over noise [%] |", "|---|---|---|"]
     for s in r["steps"]:
         L.append(f"| {s['added'] or 'nominal'} | {s['gap']:.2f} | {s['excess']:.2f} |")
+    return L
+
+
+def _md_model(r: dict, plots, payload, prismatic) -> list[str]:
+    """The final model's parameters, the output-error sets and failed simulations."""
+    L = []
     L += ["", "## Fitted parameters of the final model", "", "```",
           _params(prismatic_units(_without_payload(r["parameters"], payload), set(prismatic))), "```", ""]
     if payload:
@@ -305,9 +331,7 @@ def markdown(r: dict, plots, *, robot: str | None = None, payload: dict | None =
                  "joint is screened at every joint by simulation, a selected one identified by output error): validation gap "
                  + ", ".join(f"{j} {v['gap_screened']:.2f} % screened, {v['gap_identified']:.2f} % identified"
                              for j, v in r["simulated_refit"].items()) + ".")
-    L += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
-    L.append(f"\n_Diagnosis took {r['seconds']:.1f} s._")
-    return "\n".join(L) + "\n"
+    return L
 
 
 def _without_payload(params: dict, payload) -> dict:
@@ -354,10 +378,10 @@ def _params(p, ind=0):
     return "\n".join(out)
 
 
-def _modal_tables(pb, ev0, evf) -> dict:
+def _modal_tables(frequency_sets, ev0, evf) -> dict:
     """Per modal validation set: rows (mode, measured f, zeta, nominal f, error, final f, error)."""
     out = {}
-    for d in pb.fval:
+    for d in frequency_sets:
         if d.kind != "modal" or d.name not in ev0 or d.name not in evf:
             continue
         a = d.arrays
@@ -375,23 +399,25 @@ def _modal_tables(pb, ev0, evf) -> dict:
 
 def write_report(diag, out_dir) -> pathlib.Path:
     """Write ``diagnosis.json``, ``report.md``, the self-contained ``report.html`` and the plots into
-    ``out_dir``; returns the path of report.md."""
+    ``out_dir``; returns the path of report.md. Reads the stored diagnosis only (its result, its
+    case and the series it kept for the figures): no model is evaluated here."""
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    r, pb = diag.result, diag.problem
+    r, case, S = diag.result, diag.loaded, diag.series
     write_results(out, r, "diagnosis.json")
-    robot = robot_name(pb.case)
-    payload = _html.payload_summary(r.get("parameters", {}), pb.robot, pb.case.tool_frame)
-    ev0 = evf = None
+    robot = robot_name(case)
+    payload = _html.payload_summary(r.get("parameters", {}), case.robot, case.tool_frame)
+    ev0, evf = S.nominal, S.final
     try:
-        ev0, evf = pb.evaluate(diag.nominal), pb.evaluate(diag.final)
-        figures = _plots(diag, out, robot, ev0, evf)
+        if S.error is not None:
+            raise _StoredError(S.error)
+        figures = _plots(diag, out, robot)
     except Exception as exc:  # a plot must never lose the diagnosis itself
         figures = []
-        r["plot_error"] = f"{type(exc).__name__}: {exc}"
+        r["plot_error"] = str(exc) if isinstance(exc, _StoredError) else f"{type(exc).__name__}: {exc}"
         write_results(out, r, "diagnosis.json")
     path = out / "report.md"
-    prismatic = [j for j, k in zip(pb.robot.joint_names, pb.robot.joint_types) if k == "prismatic"]
+    prismatic = [j for j, k in zip(case.robot.joint_names, case.robot.joint_types) if k == "prismatic"]
     path.write_text(markdown(r, [f["file"] for f in figures], robot=robot, payload=payload, prismatic=prismatic))
     set_gaps = {}
     if ev0 is not None:
@@ -399,10 +425,14 @@ def write_report(diag, out_dir) -> pathlib.Path:
             if k in evf:
                 set_gaps[k] = (ev0[k]["kind"], ev0[k]["nrmse"], evf[k]["nrmse"], r["noise_floor_per_dataset"].get(k, float("nan")),
                                r.get("noise_floor_source", {}).get(k))
-    tables = _modal_tables(pb, ev0, evf) if ev0 is not None else {}
-    (out / "report.html").write_text(_html.page(r, out, figures, robot_name=robot, nominal_effects=pb.case.nominal_effects,
+    tables = _modal_tables(S.frequency, ev0, evf) if ev0 is not None else {}
+    (out / "report.html").write_text(_html.page(r, out, figures, robot_name=robot, nominal_effects=case.nominal_effects,
                                                 payload=payload, modal_tables=tables, set_gaps=set_gaps))
     return path
+
+
+class _StoredError(Exception):
+    """The simulations for the figures failed during the diagnosis (the message it recorded)."""
 
 
 def add_figures(out_dir, figures, title: str, intro: str = "") -> None:
