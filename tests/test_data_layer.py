@@ -381,10 +381,10 @@ def test_given_cutoff_reads_the_torque_noise_below_it(tmp_path, monkeypatch):
     # read off it runs up to Nyquist (2.5 kHz on a real 5 kHz log), and the torque-noise band (1.5-4
     # x it) lay above Nyquist, reading 0 N m under a given 100 Hz cutoff; the band now follows the
     # given cutoff when the motion band does not lie below it
-    import jflex.gap.torque._set as T
+    import jflex.data._angle_log as A
     from jflex.gap.torque._set import torque_set
 
-    monkeypatch.setattr(T, "motion_band", lambda q, h, sig: 0.48 / h)  # the estimator's failure
+    monkeypatch.setattr(A, "motion_band", lambda q, h, sig: 0.48 / h)  # the estimator's failure
 
     traj, fs = _motion(3), 500.0
     t = np.arange(int(8 * fs)) / fs

@@ -5,7 +5,11 @@ Readers (CSV logs with a column map, ROS 2 bags / MCAP, UFF58 FRF files, NPZ arc
 scale, offset, quality flags) and a ``conditioning`` report. The conditioning steps
 (:mod:`jflex.data._condition`) make stamps uniform, merge files on time, name dead, stuck, flat,
 saturated and few-level channels, count spikes, choose a low-pass cutoff per record and turn motor
-currents into joint torques. ``jflex.identify`` and ``jflex.gap`` read their data through it.
+currents into joint torques. Beyond them: the signal tools (:mod:`jflex.data._signal`: noise
+estimates, the motion's band, zero-phase filters, spectral and filtered derivatives), the checks of
+arrays and of each kind of data set's fields, the processing of angle-only torque logs
+(:mod:`jflex.data._angle_log`) and of response sets, and peak picking on FRFs.
+``jflex.identify`` and ``jflex.gap`` read their data through it.
 
 The folder also holds the demo case shipped with the library (``demo_case/``, ``demo_truth.json``).
 """

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._errors import DataError
-from ._signal import angle_noise, motion_band, power_band
+from ._signal import angle_noise, motion_band, power_band, robust_sigma
 
 JITTER = 0.01  # largest deviation of a step from the median step kept as it is (relative)
 DROP = 1.5  # a step over 1.5 median steps: samples were dropped there
@@ -382,8 +382,7 @@ def find_spikes(x) -> np.ndarray:
     # the larger of two robust scales: the spread of the residual off the running median (noise),
     # and that of the sample-to-sample step (a smooth, fast signal bends off its running median)
     d = np.diff(x)
-    sig = max(1.4826 * float(np.median(np.abs(r - np.median(r)))),
-              1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0))
+    sig = max(float(robust_sigma(r)), float(robust_sigma(d)) / np.sqrt(2.0))
     w = min(SPIKE_SCALE_WINDOW, x.size) | 1
     local = np.maximum(1.4826 * median_filter(np.abs(r), size=w, mode="nearest"),
                        1.4826 / np.sqrt(2.0) * median_filter(np.abs(np.r_[d, d[-1]]), size=w, mode="nearest"))

@@ -18,9 +18,13 @@ from ..._config import load_robot
 from ..._errors import ConfigError, DataError, JFlexError
 from ..._runs import load_yaml
 from ..._schema import validate
-from ...data._condition import BRIDGE, MAX_GAP, condition_torque, split_at_gaps
+from ...data._condition import BRIDGE, MAX_GAP
+from ...data._fields import numeric_field
+from ...data._frf_checks import frf_arrays, modal_arrays
 from ...data._npz import load_npz_fields
 from ...data._posture import yaml_posture as yaml_posture
+from ...data._response import TIP_CHANNELS, response_arrays, uniform_response
+from ...data._torque_fields import MIN_WINDOW_SAMPLES, torque_arrays
 from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, RobotSpec, file_format
 
 __all__ = ["Case", "Dataset", "load_case", "case_path", "EFFECT_NAMES", "KINDS", "SPLITS"]
@@ -112,141 +116,6 @@ NPZ_KEYS = {"torque": ("t", "q", "tau", "qd", "qdd", "tau_repeats", "joints"),
             "response": ("t", "tau", "y", "channels", "q0", "y_repeats")}
 
 
-def _num(arr, path, field, *, ndim=None, complex_ok=False, allow_nan=False):
-    a = np.asarray(arr)
-    if not (np.issubdtype(a.dtype, np.number)) or (np.iscomplexobj(a) and not complex_ok):
-        raise DataError(f"{path}: field '{field}': expected {'complex ' if complex_ok else 'real '}numbers, got dtype {a.dtype}")
-    if ndim is not None and a.ndim != ndim:
-        raise DataError(f"{path}: field '{field}': expected {ndim} dimension(s), got shape {a.shape}")
-    bad = ~np.isfinite(a)
-    if bad.any() and not allow_nan:
-        idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise DataError(f"{path}: field '{field}': contains NaN/inf, the first at index {idx}")
-    # finite values whose squares overflow: every gap measure sums squares (a relative RMS), which
-    # would turn inf and the gap NaN
-    fin = np.abs(a[~bad]) if bad.any() else np.abs(a)
-    if fin.size:
-        with np.errstate(over="ignore"):
-            energy = float(np.sum(np.square(fin)))
-        if not np.isfinite(energy):
-            raise DataError(f"{path}: field '{field}': magnitudes up to {float(fin.max()):.3g} overflow the squared "
-                            "sums of the gap measures; expected values in SI units (a unit or scale slip?)")
-    return a.astype(complex if np.iscomplexobj(a) else float)
-
-
-def _columns(arrs, path, robot, width_field: str, width: int):
-    """Map data columns to model joints with the optional ``joints`` name array."""
-    names = tuple(robot.joint_names)
-    if "joints" in arrs:
-        jn = tuple(str(s) for s in np.asarray(arrs["joints"]).ravel())
-        if len(jn) != width:
-            raise DataError(f"{path}: field 'joints': {len(jn)} names but '{width_field}' has {width} columns")
-        missing = [j for j in names if j not in jn]
-        if missing:
-            raise DataError(f"{path}: field 'joints': model joints {missing} are not in the data (joints {list(jn)})")
-        idx = [jn.index(j) for j in names]
-        extra = [i for i in range(width) if jn[i] not in names]
-        return idx, extra, tuple(jn[i] for i in extra)
-    if width != len(names):
-        raise DataError(
-            f"{path}: field '{width_field}': {width} columns but the model has {len(names)} joints {list(names)}; "
-            "add a 'joints' array naming each column when the data records more joints"
-        )
-    return list(range(width)), [], ()
-
-
-def _torque(arrs, path, robot, options=None, *, split: bool = False):
-    """The torque data set's arrays in model joint order, conditioned (:func:`jflex.data.condition_torque`:
-    stamps made uniform, torque channels checked). **Returns** ``(arrays, extra joints, report,
-    excluded joints)``.
-
-    With ``split``, a log with gaps too long to bridge is cut at them
-    (:func:`jflex.data._condition.split_at_gaps`) and each stretch conditioned on its own:
-    **returns** ``(stretches, split report, extra joints)``, ``stretches`` a list in time order of
-    ``((start_s, end_s, raw rows) or None, (arrays, report, excluded) or None)`` (None: a stretch
-    under ``MIN_WINDOW_SAMPLES`` rows; a log without such gaps is one stretch, ``(None, ...)``,
-    and the report None)."""
-    options = options or {}
-    for k in ("t", "q", "tau"):
-        if k not in arrs:
-            raise DataError(f"{path}: field '{k}': missing (a torque data set needs t (N,), q (N, n), tau (N, n))")
-    t = _num(arrs["t"], path, "t", ndim=1)
-    if t.size < 20:
-        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
-    q = _num(arrs["q"], path, "q", ndim=2)
-    if q.shape[0] != t.size:
-        raise DataError(f"{path}: field 'q': {q.shape[0]} rows but 't' has {t.size} samples")
-    idx, extra, extra_names = _columns(arrs, path, robot, "q", q.shape[1])
-    n = robot.nq
-    rows = {"q": q[:, idx], "q_extra": q[:, extra]}
-    tau = _num(arrs["tau"], path, "tau", ndim=2)
-    if tau.shape[0] != t.size:
-        raise DataError(f"{path}: field 'tau': {tau.shape[0]} rows but 't' has {t.size} samples")
-    # with a 'joints' array, torque columns as wide as the angle columns follow it like them
-    # (permuted or with extra joints); otherwise they are in model joint order
-    permuted = tau.shape[1] == q.shape[1] and ("joints" in arrs or q.shape[1] != n)
-    if permuted:
-        tau = tau[:, idx]
-    if tau.shape[1] != n:
-        raise DataError(f"{path}: field 'tau': expected {n} columns (model joints {list(robot.joint_names)}), got {tau.shape[1]}")
-    rows["tau"] = tau
-    for k in ("qd", "qdd"):
-        if k in arrs:
-            a = _num(arrs[k], path, k, ndim=2)
-            if a.shape != q.shape:
-                raise DataError(f"{path}: field '{k}': expected shape {q.shape} (as q), got {a.shape}")
-            rows[k] = a[:, idx]
-    reps = None
-    if "tau_repeats" in arrs:
-        r = _num(arrs["tau_repeats"], path, "tau_repeats", ndim=3)
-        if r.shape[1:] != (t.size, arrs["tau"].shape[1]):
-            raise DataError(f"{path}: field 'tau_repeats': expected (R, {t.size}, {arrs['tau'].shape[1]}) (repeats of "
-                            f"tau), got {r.shape}")
-        reps = r[:, :, idx] if permuted else r
-    if reps is not None and np.any(np.diff(t) <= 0):
-        raise DataError(f"{path}: field 't': time must be strictly increasing (a set with tau_repeats is not resampled)")
-    if reps is not None:
-        rows["tau_repeats"] = np.moveaxis(reps, 0, 1)  # rows first, so conditioning keeps them aligned
-    if not split:
-        out, report, excluded = _conditioned(t, rows, path, robot, options)
-        return out, extra_names, report, excluded
-    cut = split_at_gaps(t, rows, str(path))
-    if cut is None:
-        return [(None, _conditioned(t, rows, path, robot, options))], None, extra_names
-    stretches, split_report = cut
-    out = []
-    for a, b in stretches:
-        m = (t >= a) & (t <= b)
-        part = {k: v[m] for k, v in rows.items()}
-        if m.sum() < MIN_WINDOW_SAMPLES:
-            out.append(((a, b, int(m.sum())), None))
-            continue
-        out.append(((a, b, int(m.sum())), _conditioned(t[m], part, path, robot, options,
-                                                        split_report["gap_bridge_limit_s"])))
-    return out, split_report, extra_names
-
-
-def _conditioned(t, rows, path, robot, options, bridge_s=None):
-    """:func:`jflex.data.condition_torque` on the rows of one record (or of one stretch of it, with
-    the longest gap bridged in the whole record ``bridge_s``), derivatives filled in.
-    **Returns** ``(arrays, report, excluded joints)``."""
-    t, out, report, excluded = condition_torque(
-        t, rows, list(robot.joint_names), str(path), keep=tuple(options.get("keep_channels") or ()),
-        replace_spikes=bool(options.get("replace_spikes", False)), bridge_s=bridge_s)
-    if "tau_repeats" in out:
-        out["tau_repeats"] = np.moveaxis(out["tau_repeats"], 1, 0)
-    out["t"] = t
-    if t.size < 20:
-        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
-    # derivatives missing: central differences of q (documented; the diagnosis filters an
-    # angle-only or velocity-only set before differentiating, see jflex.gap.torque_set)
-    if "qd" not in out:
-        out["qd"] = np.gradient(out["q"], t, axis=0)
-    if "qdd" not in out:
-        out["qdd"] = np.gradient(out["qd"], t, axis=0)
-    return out, report, excluded
-
-
 STRETCH_MARK = "#"  # a stretch of a split log is named <data set>#<k>, k counting its stretches in time order
 
 
@@ -256,7 +125,8 @@ def _too_short(data, report, options) -> str | None:
     angles low-passed there lose ``EDGE_PERIODS`` periods of the cutoff at each end to the filter's
     transients and keep at least 20 samples per decimation step between them."""
     from ...data._condition import choose_cutoff
-    from ..torque._set import CUTOFF_FACTOR, CUTOFF_LIMIT, EDGE_PERIODS
+    from ...data._angle_log import EDGE_PERIODS
+    from ...data._condition import CUTOFF_FACTOR, CUTOFF_LIMIT
 
     t = data["t"]
     if report.get("derivatives") == "given":  # used as they are, unfiltered
@@ -275,7 +145,7 @@ def _too_short(data, report, options) -> str | None:
 
 
 def _stretches(stretches, split_report, base: str, path, options):
-    """The data sets of one torque log (:func:`_torque` with ``split``): ``(kept, notes)``, ``kept``
+    """The data sets of one torque log (:func:`jflex.data._torque_fields.torque_arrays` with ``split``): ``(kept, notes)``, ``kept``
     a list of ``(name, (arrays, report, excluded), split_from)``. A log conditioned whole keeps its
     name and ``split_from`` None. A log cut at gaps too long to bridge gives one data set per
     stretch, ``base#k`` (k counting every stretch in time order), each with ``split_from`` (the
@@ -317,212 +187,22 @@ def _stretches(stretches, split_report, base: str, path, options):
     return kept, notes
 
 
-def _posture(arrs, path, robot):
-    if "q0" not in arrs:
-        raise DataError(f"{path}: field 'q0': missing (the posture (n,) [rad] of the measurement)")
-    q0 = _num(arrs["q0"], path, "q0", ndim=1)
-    idx, extra, names = _columns(arrs, path, robot, "q0", q0.size)
-    return q0[idx], q0[extra], names
-
-
 def _frf(arrs, path, robot):
-    q0, q0x, names = _posture(arrs, path, robot)
-    for k in ("freq", "H"):
-        if k not in arrs:
-            raise DataError(f"{path}: field '{k}': missing (an frf data set needs q0, freq (F,) [Hz], H (F, 3, 3))")
-    f = _num(arrs["freq"], path, "freq", ndim=1)
-    if f.size == 0:
-        raise DataError(f"{path}: field 'freq': empty; expected at least one frequency line")
-    if np.any(f <= 0) or np.any(np.diff(f) <= 0):
-        raise DataError(f"{path}: field 'freq': frequencies must be > 0 Hz and strictly increasing")
-    H = _num(arrs["H"], path, "H", ndim=3, complex_ok=True)
-    if H.shape != (f.size, 3, 3):
-        raise DataError(f"{path}: field 'H': expected shape ({f.size}, 3, 3) (freq x output x input), got {H.shape}")
-    out = {"q0": q0, "q0_extra": q0x, "freq": f, "H": H.astype(complex)}
-    if "H_repeats" in arrs:
-        r = _num(arrs["H_repeats"], path, "H_repeats", ndim=4, complex_ok=True).astype(complex)
-        if r.shape[1:] != H.shape or r.shape[0] < 2:
-            raise DataError(f"{path}: field 'H_repeats': expected shape (R, {f.size}, 3, 3) with R >= 2 repeats of H, "
-                            f"got {r.shape}")
-        out["H_repeats"] = r
-    return out, names
+    return frf_arrays(arrs, path, robot.joint_names)
 
 
 def _modal(arrs, path, robot):
-    q0, q0x, names = _posture(arrs, path, robot)
-    for k in ("freq", "zeta"):
-        if k not in arrs:
-            raise DataError(f"{path}: field '{k}': missing (a modal data set needs q0, freq (M,) [Hz], zeta (M,))")
-    f = _num(arrs["freq"], path, "freq", ndim=1)
-    if f.size == 0:
-        raise DataError(f"{path}: field 'freq': the modal table is empty; expected at least one mode")
-    z = _num(arrs["zeta"], path, "zeta", ndim=1, allow_nan=True)
-    if np.any(f <= 0):
-        raise DataError(f"{path}: field 'freq': natural frequencies must be > 0 Hz")
-    if z.shape != f.shape:
-        raise DataError(f"{path}: field 'zeta': expected shape {f.shape} (one ratio per mode), got {z.shape}")
-    if np.any(z[~np.isnan(z)] < 0) or np.any(z[~np.isnan(z)] >= 1):  # NaN: not measured; +-inf is refused
-        raise DataError(f"{path}: field 'zeta': damping ratios must lie in [0, 1) (a ratio, not a percentage)")
-    out = {"q0": q0, "q0_extra": q0x, "freq": f, "zeta": z}
-    if "shapes" in arrs:
-        s = _num(arrs["shapes"], path, "shapes", ndim=2, complex_ok=True)
-        if s.shape[1] != f.size:
-            raise DataError(f"{path}: field 'shapes': expected (s, {f.size}) (one column per mode), got {s.shape}")
-        out["shapes"] = s
-    return out, names
-
-
-TIP_CHANNELS = ("tip_x", "tip_y", "tip_z")  # [m] origin of the case's tool_frame in base axes
-RESPONSE_NOISE_DRAWS = 4  # noise realisations propagated into the equation error (noise floor)
-RESPONSE_CUTOFF_FACTOR = 2.0
-RESPONSE_SG_ORDER = 5
-RESPONSE_SNR = 100.0  # the motion's band ends where its spectrum falls to 100 x the angle-noise level
+    return modal_arrays(arrs, path, robot.joint_names)
 
 
 def _response(arrs, path, robot):
-    for k in ("t", "tau", "y", "channels"):
-        if k not in arrs:
-            raise DataError(f"{path}: field '{k}': missing (a response data set needs t, tau (N, n), y (N, k), channels (k,))")
-    t = _num(arrs["t"], path, "t", ndim=1)
-    tau = _num(arrs["tau"], path, "tau", ndim=2)
-    y = _num(arrs["y"], path, "y", ndim=2)
-    ch = tuple(str(c) for c in np.asarray(arrs["channels"]).ravel())
-    if tau.shape[0] != t.size or y.shape[0] != t.size:
-        raise DataError(f"{path}: fields 'tau'/'y': expected {t.size} rows (as t), got {tau.shape[0]} and {y.shape[0]}")
-    if len(ch) != y.shape[1]:
-        raise DataError(f"{path}: field 'channels': {len(ch)} names for {y.shape[1]} columns of 'y'")
-    if len(set(ch)) != len(ch):
-        raise DataError(f"{path}: field 'channels': names must be unique, got {list(ch)}")
-    n = robot.nq
-    if tau.shape[1] != n:
-        raise DataError(f"{path}: field 'tau': expected {n} columns (applied torques at the model joints "
-                        f"{list(robot.joint_names)}), got {tau.shape[1]}")
-    known = tuple(robot.joint_names) + TIP_CHANNELS
-    bad = [c for c in ch if c not in known]
-    if bad:
-        raise DataError(f"{path}: field 'channels': unknown channels {bad}; a channel is a model joint "
-                        f"{list(robot.joint_names)} [rad] or one of {list(TIP_CHANNELS)} [m] (the case's tool_frame)")
-    out = {"t": t, "tau": tau, "y": y, "channels": ch}
-    if all(j in ch for j in robot.joint_names):
-        out.update(_response_motion(t, tau, y, ch, path, robot))
-        return out, ()
-    # output error: the model is simulated under tau from rest at q0 and its channels compared
-    if t.size < 20:
-        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
-    if np.any(np.diff(t) <= 0):
-        raise DataError(f"{path}: field 't': time must be strictly increasing")
-    if "q0" not in arrs:
-        raise DataError(f"{path}: field 'q0': missing (a response whose channels do not name every model joint "
-                        f"{list(robot.joint_names)} is simulated from rest at q0 ({n},) [rad])")
-    q0 = _num(arrs["q0"], path, "q0")
-    if q0.shape != (n,):
-        raise DataError(f"{path}: field 'q0': expected shape ({n},) (the rest posture at t[0], model joints "
-                        f"{list(robot.joint_names)} in that order) [rad], got shape {q0.shape}")
-    out["q0"] = q0
-    if "y_repeats" in arrs:
-        r = _num(arrs["y_repeats"], path, "y_repeats", ndim=3)
-        if r.shape[1:] != y.shape:
-            raise DataError(f"{path}: field 'y_repeats': expected (R, {y.shape[0]}, {y.shape[1]}) (repeats of y), got {r.shape}")
-        out["y_repeats"] = r
-    return out, ()
-
-
-def _uniform_response(arrs, path):
-    """A response set's rows resampled onto a uniform grid when its stamps jitter or drop samples
-    (:func:`jflex.data.resample_uniform`); ``(arrays, sampling report or None)``. Malformed
-    fields are left to :func:`_response` to name."""
-    from ...data._condition import resample_uniform
-
-    try:
-        t = np.asarray(arrs["t"], float)
-        tau, y = np.asarray(arrs["tau"], float), np.asarray(arrs["y"], float)
-    except (KeyError, TypeError, ValueError):
-        return arrs, None
-    if t.ndim != 1 or t.size < 20 or tau.shape[:1] != t.shape or y.shape[:1] != t.shape or \
-            not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        return arrs, None
-    rows = {"tau": tau, "y": y}
-    if "y_repeats" in arrs and np.ndim(arrs["y_repeats"]) == 3 and np.shape(arrs["y_repeats"])[1] == t.size:
-        rows["y_repeats"] = np.moveaxis(np.asarray(arrs["y_repeats"], float), 0, 1)
-    t2, rows, report = resample_uniform(t, rows, str(path))
-    if not report["resampled"]:
-        return arrs, report
-    out = {**arrs, "t": t2, "tau": rows["tau"], "y": rows["y"]}
-    if "y_repeats" in rows:
-        out["y_repeats"] = np.moveaxis(rows["y_repeats"], 1, 0)
-    return out, report
-
-
-def _motion_band(q_raw, sig, fs):
-    """Highest frequency [Hz] where some joint's angle spectrum (Welch) stands ``RESPONSE_SNR``
-    above the white angle noise ``sig`` [rad].
-
-    Not :func:`jflex.identify.motion_band`, on purpose: that one (the band off the second
-    difference, held within 2 x the 99.9 % power band on quantised angles) serves the Butterworth
-    filter of torque logs. Here it gave bands of about 1 Hz where this one gives 1.4-5 Hz on the
-    response tests' trajectories (harmonics up to 0.5 Hz), so a Savitzky-Golay window 1.4-5 x as
-    long; with it the gap a planted rotor inertia leaves once fitted was 1.9 x the propagated floor
-    (0.72 against 0.38 %) and a null case with 1 mrad angle noise read as significant (the
-    smoothing's own error on the motion, it seems, which a floor propagated from noise lacks)."""
-    from scipy.signal import welch
-
-    nper = min(len(q_raw), 1024)
-    f, P = welch(q_raw - q_raw.mean(axis=0), fs=fs, nperseg=nper, axis=0)
-    level = 2.0 * np.maximum(sig, 1e-15) ** 2 / fs  # one-sided PSD of white noise of std sig
-    above = (P > RESPONSE_SNR * level[None, :]).any(axis=1)
-    return float(f[np.flatnonzero(above)[-1]]) if above.any() else float(f[1])
-
-
-def _response_motion(t, tau, y, ch, path, robot):
-    """Joint channels of a response as an equation-error data set: measured angles smoothed and
-    differentiated (Savitzky-Golay, cubic), the applied torques as ``tau``. The window puts the
-    filter's cutoff at twice the band of the motion, the band read off the angles' spectrum
-    against their noise (:func:`_motion_band`).
-
-    The differentiation turns angle noise into coloured torque-residual noise, which the
-    residual's own high-frequency content would understate; so the noise of the angles (robust
-    spread of their second difference) is propagated instead: ``tau_repeats`` holds the applied
-    torques plus the nominal model's torque change under ``RESPONSE_NOISE_DRAWS`` redraws of it.
-    """
-    from scipy.signal import savgol_filter
-
+    # the torque sets' compiled batch inverse dynamics: one compile per robot structure
     from ..torque._set import _id_batch, on_rows
 
-    if t.size < 20:
-        raise DataError(f"{path}: field 't': need at least 20 samples, got {t.size}")
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        raise DataError(f"{path}: field 't': time must be strictly increasing")
-    if np.max(np.abs(dt - dt.mean())) > 0.01 * dt.mean():
-        raise DataError(f"{path}: field 't': joint-angle channels need uniform sampling (steps vary by "
-                        f"{100 * np.max(np.abs(dt - dt.mean())) / dt.mean():.1f} %, more than 1 %)")
-    h = float(dt.mean())
-    q_raw = y[:, [ch.index(j) for j in robot.joint_names]]
-    d2 = q_raw[2:] - 2 * q_raw[1:-1] + q_raw[:-2]
-    sig = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
-    fc = RESPONSE_CUTOFF_FACTOR * _motion_band(q_raw, sig, 1.0 / h)
-    # Savitzky-Golay of order p and half-width m has its -3 dB point near (p + 1) / (3.2 m - 4.6)
-    # x Nyquist (Schafer 2011)
-    p = RESPONSE_SG_ORDER
-    m = int(np.clip(((p + 1) * (0.5 / h) / fc + 4.6) / 3.2, p, (t.size - 1) // 2))
-    win = 2 * m + 1
-
-    def derive(qr):
-        return tuple(savgol_filter(qr, win, p, deriv=k, delta=h, axis=0) for k in range(3))
-
-    q, qd, qdd = derive(q_raw)
-    rng = np.random.default_rng(0)
-    # the torque sets' compiled batch inverse dynamics: one compile per robot structure
-    F0 = on_rows(_id_batch, (robot,), (q, qd, qdd))
-    reps = []
-    for _ in range(RESPONSE_NOISE_DRAWS):
-        qk, qdk, qddk = derive(q + sig * rng.standard_normal(q.shape))
-        reps.append(tau + on_rows(_id_batch, (robot,), (qk, qdk, qddk)) - F0)
-    return {"q": q, "qd": qd, "qdd": qdd, "q_extra": np.zeros((t.size, 0)), "tau_repeats": np.stack(reps),
-            "angle_noise_rad": sig, "cutoff_hz": fc, "window_samples": win}
+    return response_arrays(arrs, path, robot.joint_names, lambda *x: on_rows(_id_batch, (robot,), x))
 
 
-_LOADERS = {"torque": _torque, "frf": _frf, "modal": _modal, "response": _response}
+_LOADERS = {"frf": _frf, "modal": _modal, "response": _response}
 _CONFIG_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
 
@@ -633,7 +313,6 @@ def _nominal(specs, robot, file) -> list[dict]:
     return nominal
 
 
-MIN_WINDOW_SAMPLES = 20  # a torque record shorter than this is refused (see _torque)
 
 
 def window_mask(t, window) -> np.ndarray:
@@ -666,34 +345,10 @@ def _window(arrs: dict, window, path, fld: str, case_file) -> dict:
     return out
 
 
-def load_case(path, *, allow_outside: bool = False) -> Case:
-    """Read and validate a case folder (or its ``case.yaml``).
-
-    **Arguments:**
-
-    - ``path``: the folder holding ``case.yaml``, or the YAML file itself.
-    - ``allow_outside``: let ``robot``, ``robot_inertia`` and data ``file`` paths leave the case
-      folder (absolute paths, ``..``); off by default, so a case reads only its own files.
-
-    **Returns:** a :class:`Case`. Raises :class:`jflex.ConfigError` / :class:`jflex.DataError`
-    naming the file and field of the first problem found. A torque log with gaps too long to
-    bridge is split at them into several data sets (see :class:`Dataset`), a stretch too short
-    for the low-pass dropped; both are warned of (a ``UserWarning``, kept in ``Case.warnings`` and
-    the first stretch's ``conditioning["warnings"]``). The schema of ``case.yaml`` is
-    :class:`jflex.gap.case._schema.CaseSpec` (the table in ``docs/case_format.md``).
-    """
-    from ...data._csv import read_csv
-    from ...data._npz import read_npz
-    from ...data._record import Record
-    from ...data._rosbag import read_rosbag
-    from ...data._uff import uff_arrays
-
-    p = pathlib.Path(path)
-    file = p / "case.yaml" if p.is_dir() else p
-    if not file.is_file():
-        raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
-    base = file.parent
-    spec = validate(CaseSpec, load_yaml(file), file, context={"folder": base})
+def _case_robot(spec, base, file, allow_outside):
+    """The case's robot, its inertia replaced by ``robot_inertia`` when given, and the robot's
+    warnings (passed on): ``(robot, notes)``. Refuses coupled joints, unknown ``keep_channels``
+    and an unknown ``tool_frame``."""
     # the robot's warnings (a massless link, a non-physical inertia) are the user's to see, and the
     # report's: passed on, and kept
     with warnings.catch_warnings(record=True) as caught:
@@ -719,7 +374,7 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
         arr = load_npz_fields(ip, "robot_inertia", file, ("inertia",))
         if "inertia" not in arr:
             raise DataError(f"{ip}: field 'inertia': missing ((n, 10) link parameters in Pinocchio's order)")
-        P = _num(arr["inertia"], ip, "inertia", ndim=2)
+        P = numeric_field(arr["inertia"], ip, "inertia", ndim=2)
         if P.shape != (robot.nq, 10):
             raise DataError(f"{ip}: field 'inertia': expected shape ({robot.nq}, 10), got {P.shape}")
         robot = robot.replace(inertia=P)
@@ -729,59 +384,106 @@ def load_case(path, *, allow_outside: bool = False) -> Case:
             robot.frame_index(tool)
         except JFlexError:
             raise _err(file, "tool_frame", f"unknown frame {tool!r}; frames: {list(robot.link_names) + list(robot.frame_names)}") from None
+    return robot, notes
+
+
+def _read_dataset(d, fld: str, base, file, robot, allow_outside):
+    """The :class:`jflex.data.Record` of the data set ``d`` (``fld`` in case.yaml), read by its
+    file's format and cut to its window: ``(record, first file, every file)``."""
+    from ...data._csv import read_csv
+    from ...data._npz import read_npz
+    from ...data._record import Record
+    from ...data._rosbag import read_rosbag
+    from ...data._uff import uff_arrays
+
+    many = isinstance(d.file, list)
+    fpaths = [case_path(base, f, f"{fld}.file" + (f"[{k}]" if many else ""), file, allow_outside)
+              for k, f in enumerate(d.file if many else [d.file])]
+    fpath = fpaths[0]
+    fmt = file_format(fpaths[0].name if many else d.file, base)
+    if fmt == "csv":
+        rec = read_csv(fpaths, d, robot, file, fld)
+    elif fmt == "rosbag":
+        rec = read_rosbag(fpath, d, robot, file, fld)
+    elif fmt == "uff":
+        rec = Record(uff_arrays(fpath, d, robot, file, fld))
+    else:
+        rec = read_npz(fpath, f"{fld}.file", file, NPZ_KEYS[d.kind])
+    if d.window is not None:
+        rec.arrays = _window(rec.arrays, d.window, fpath, fld, file)
+        rec.conditioning["window_s"] = list(d.window)
+    return rec, fpath, fpaths
+
+
+def _torque_datasets(d, rec, cond, fpath, fpaths, robot, options):
+    """The data sets of one torque log (one, or one per stretch of a log split at gaps too long to
+    bridge): ``(data sets, notes)``; the notes are warned of and kept with the first stretch."""
+    from ...data._record import Record
+
+    stretches, split_report, extra = torque_arrays(rec.arrays, fpath, robot.joint_names, options, split=True)
+    kept, notes_split = _stretches(stretches, split_report, d.name or fpath.stem, fpath, options)
+    datasets = []
+    for piece_name, (data, report, excluded), split_from in kept:
+        pcond, channels = dict(cond), dict(rec.channels)
+        if "sampling" in pcond:  # the reader resampled already: its numbers describe the raw stamps
+            report["sampling"] = {**report["sampling"], **pcond.pop("sampling")}
+        if split_from is not None:
+            report["sampling"]["split_from"] = split_from
+        pcond.update(report)
+        piece = Record(rec.arrays, channels)
+        for j, c in report["channels"].items():
+            if c["flags"]:
+                piece.flag(f"tau:{j}", *c["flags"])
+        datasets.append(Dataset(d.kind, fpath, d.split, piece_name, data, extra, pcond, excluded,
+                                piece.channels, tuple(fpaths)))
+    for msg in notes_split:
+        warnings.warn(msg, UserWarning, stacklevel=3)
+        datasets[-len(kept)].conditioning.setdefault("warnings", []).append(msg)
+    return datasets, notes_split
+
+
+def load_case(path, *, allow_outside: bool = False) -> Case:
+    """Read and validate a case folder (or its ``case.yaml``).
+
+    **Arguments:**
+
+    - ``path``: the folder holding ``case.yaml``, or the YAML file itself.
+    - ``allow_outside``: let ``robot``, ``robot_inertia`` and data ``file`` paths leave the case
+      folder (absolute paths, ``..``); off by default, so a case reads only its own files.
+
+    **Returns:** a :class:`Case`. Raises :class:`jflex.ConfigError` / :class:`jflex.DataError`
+    naming the file and field of the first problem found. A torque log with gaps too long to
+    bridge is split at them into several data sets (see :class:`Dataset`), a stretch too short
+    for the low-pass dropped; both are warned of (a ``UserWarning``, kept in ``Case.warnings`` and
+    the first stretch's ``conditioning["warnings"]``). The schema of ``case.yaml`` is
+    :class:`jflex.gap.case._schema.CaseSpec` (the table in ``docs/case_format.md``).
+    """
+    p = pathlib.Path(path)
+    file = p / "case.yaml" if p.is_dir() else p
+    if not file.is_file():
+        raise ConfigError(f"{file}: case file not found (a case is a folder with case.yaml)")
+    base = file.parent
+    spec = validate(CaseSpec, load_yaml(file), file, context={"folder": base})
+    robot, notes = _case_robot(spec, base, file, allow_outside)
+    tool = spec.tool_frame
     nominal = _nominal(spec.nominal_effects, robot, file)
     datasets, specs, split_notes = [], [], []
     for i, d in enumerate(spec.datasets):
         fld = f"datasets[{i}]"
         if d.kind == "frf" and tool is None:
             raise _err(file, "tool_frame", f"needed by the frf data set {fld} (FRFs are at the tool frame)")
-        many = isinstance(d.file, list)
-        fpaths = [case_path(base, f, f"{fld}.file" + (f"[{k}]" if many else ""), file, allow_outside)
-                  for k, f in enumerate(d.file if many else [d.file])]
-        fpath = fpaths[0]
-        fmt = file_format(fpaths[0].name if many else d.file, base)
-        if fmt == "csv":
-            rec = read_csv(fpaths, d, robot, file, fld)
-        elif fmt == "rosbag":
-            rec = read_rosbag(fpath, d, robot, file, fld)
-        elif fmt == "uff":
-            rec = Record(uff_arrays(fpath, d, robot, file, fld))
-        else:
-            rec = read_npz(fpath, f"{fld}.file", file, NPZ_KEYS[d.kind])
-        if d.window is not None:
-            rec.arrays = _window(rec.arrays, d.window, fpath, fld, file)
-            rec.conditioning["window_s"] = list(d.window)
+        rec, fpath, fpaths = _read_dataset(d, fld, base, file, robot, allow_outside)
         cond, excluded = dict(rec.conditioning), ()
         if d.kind == "torque":
-            options = spec.options.model_dump()
-            stretches, split_report, extra = _torque(rec.arrays, fpath, robot, options, split=True)
-            kept, notes_split = _stretches(stretches, split_report, d.name or fpath.stem, fpath, options)
-            for piece_name, (data, report, excluded), split_from in kept:
-                pcond, channels = dict(cond), dict(rec.channels)
-                if "sampling" in pcond:  # the reader resampled already: its numbers describe the raw stamps
-                    report["sampling"] = {**report["sampling"], **pcond.pop("sampling")}
-                if split_from is not None:
-                    report["sampling"]["split_from"] = split_from
-                pcond.update(report)
-                piece = Record(rec.arrays, channels)
-                for j, c in report["channels"].items():
-                    if c["flags"]:
-                        piece.flag(f"tau:{j}", *c["flags"])
-                datasets.append(Dataset(d.kind, fpath, d.split, piece_name, data, extra, pcond, excluded,
-                                        piece.channels, tuple(fpaths)))
-                specs.append(d)
-            for msg in notes_split:
-                warnings.warn(msg, UserWarning, stacklevel=2)
-                datasets[-len(kept)].conditioning.setdefault("warnings", []).append(msg)
-            split_notes += notes_split
+            kept, notes_split = _torque_datasets(d, rec, cond, fpath, fpaths, robot, spec.options.model_dump())
+            datasets, specs, split_notes = datasets + kept, specs + [d] * len(kept), split_notes + notes_split
             continue
-        else:
-            arrs = rec.arrays
-            if d.kind == "response":
-                arrs, sampling = _uniform_response(arrs, fpath)
-                if sampling is not None:
-                    cond["sampling"] = {**sampling, **cond.get("sampling", {})}
-            data, extra = _LOADERS[d.kind](arrs, fpath, robot)
+        arrs = rec.arrays
+        if d.kind == "response":
+            arrs, sampling = uniform_response(arrs, fpath)
+            if sampling is not None:
+                cond["sampling"] = {**sampling, **cond.get("sampling", {})}
+        data, extra = _LOADERS[d.kind](arrs, fpath, robot)
         if d.kind == "response" and tool is None and any(c in TIP_CHANNELS for c in data["channels"]):
             raise _err(file, "tool_frame", f"needed by the response data set {fld} ({fpath.name}): its tip channels "
                        "are positions of the tool frame")

@@ -24,8 +24,9 @@ import scipy.optimize as so
 from ..._dynamics import rnea
 from ..._errors import DataError
 from ..._sweep import flagged_vmap
-from ...data._signal import (angle_noise, band_noise_psd, filtered_derivatives, lowpass_power_gain,
-                                motion_band, velocity_lag, zero_phase_lowpass)
+from ...data._angle_log import VELOCITY_LAG_MIN, process_angle_log, propagated_noise, trimmed
+from ...data._condition import CUTOFF_FACTOR as CUTOFF_FACTOR  # the torque terms' own low-pass reads it here
+from ...data._signal import shift, zero_phase_lowpass
 
 
 
@@ -114,14 +115,6 @@ def _rigid_row(robot, a, b, c):
 _rigid_batch = flagged_vmap(_rigid_row, in_axes=(None, 0, 0, 0))  # (N, n), (N, n, 10 n)
 
 
-CUTOFF_FACTOR = 2.5  # the parallel low-pass sits at 2.5 x the motion's band (2-5 x is usual)
-CUTOFF_LIMIT = 0.8  # x Nyquist: the highest cutoff "auto" gives a record (jflex.data.choose_cutoff)
-VELOCITY_LAG_MIN = 0.1  # x the sample step: logged velocities lagging the angles by more are moved back
-NOISE_DRAWS = 4  # angle-noise redraws propagated through the processing and the model (noise floor)
-NOISE_BAND = (1.5, 4.0)  # x the motion band: where the raw torque's noise level is read
-EDGE_PERIODS = 2.0  # periods of the cutoff trimmed off each end of a filtered record (transients)
-
-
 def derivatives_given(ds) -> bool:
     """Whether a torque set recorded its own rates and accelerations. The loader fills missing
     ones with central differences of ``q`` (bit for bit), which is how an angle-only log is told
@@ -135,13 +128,13 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
 
     A set that gave angles only (a real log: encoder angles, quantised, and motor torques) is
     processed as for identification: the motion's band is read off the angle spectrum against the
-    angle noise (:func:`jflex.identify.motion_band`), the angles are low-passed at ``cutoff_hz``
+    angle noise (:func:`jflex.data._signal.motion_band`), the angles are low-passed at ``cutoff_hz``
     (``"auto"``: ``CUTOFF_FACTOR`` x that band) with a zero-phase Butterworth filter and
     differentiated, and the same filter is applied to the measured torques and to every model
     column (parallel filtering), optionally followed by keeping every ``decimate``-th sample. The
     noise the filtered residual keeps is predicted from the raw torque's spectrum just above the
     motion band (extrapolated flat into it and weighted by the filter) plus the angle noise
-    propagated through the processing and the model (``NOISE_DRAWS`` redraws).
+    propagated through the processing and the model (:func:`jflex.data._angle_log.process_angle_log`).
 
     A set that gave velocities without accelerations is processed the same way, its velocities
     low-passed (not the angles differentiated) before they are differentiated once. ``"auto"``
@@ -149,8 +142,6 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
     with a named fallback (:func:`jflex.data.choose_cutoff`); stamps that are not uniform are
     resampled first (:func:`jflex.data.resample_uniform`; :func:`jflex.gap.load_case` has done so
     already for every reader)."""
-    from ...data._condition import choose_cutoff, resample_uniform
-
     a = ds.arrays
     t, tau_raw = np.asarray(a["t"], float), np.asarray(a["tau"], float)
     valid = np.asarray(a["tau_valid"], bool) if "tau_valid" in a else None  # clipped samples masked
@@ -167,94 +158,22 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
         rows["qd"] = np.asarray(a["qd"], float)
     if valid is not None:
         rows["tau_valid"] = valid.astype(float)
-    t, rows, sampling = resample_uniform(t, rows, ds.name)
-    q_raw, tau_raw = rows["q"], rows["tau"]
-    h = float(np.mean(np.diff(t)))
-    sig_q = angle_noise(q_raw)
-    # the angle noise redrawn through the processing (the floor's processing term): read off the
-    # motion (a fast smooth motion's second difference is no noise)
-    sig_draw = angle_noise(q_raw, motion_free=True)
-    f_m = motion_band(q_raw, h, sig_q)
-    nyq = 0.5 / (h * decimate)
-    if cutoff_hz in (None, "auto"):
-        fc, cut = choose_cutoff(q_raw, h, qd=rows.get("qd"), factor=CUTOFF_FACTOR, decimate=decimate,
-                                limit=CUTOFF_LIMIT)
-        f_b = fc / CUTOFF_FACTOR  # the band the cutoff stands for (the motion band, or the fallback's)
-    else:
-        fc, cut = float(cutoff_hz), {"method": "given (options.filter_cutoff_hz)", "nyquist_hz": nyq}
-        # the band the given cutoff stands for: the motion band when it lies below the cutoff, else
-        # (a band read off a spectrum that never meets the angle noise) the cutoff's own
-        f_b = f_m if 0 < f_m < fc else fc / CUTOFF_FACTOR
-        if not 0 < fc < 0.9 * nyq:
-            raise DataError(f"{ds.name}: the low-pass cutoff {fc:.3g} Hz must lie below 0.9 x the Nyquist frequency "
-                            f"{nyq:.3g} Hz of this record{' after decimation' if decimate > 1 else ''} "
-                            "(options.filter_cutoff_hz, options.decimate; filter_cutoff_hz: auto chooses a cutoff per "
-                            "record)")
-
-    def derive(qr, qdr=None):
-        if qdr is None:
-            return filtered_derivatives(qr, h, fc)
-        qf, qdf = zero_phase_lowpass(qr, h, fc), zero_phase_lowpass(qdr, h, fc)
-        return qf, qdf, np.gradient(qdf, h, axis=0)
-
-    sig_qd = None
-    if velocity_only:
-        # the velocities' noise where the filter lets it through: a differenced encoder's is blue
-        # (its total, the grid step of the differences, is mostly far above the cutoff), and a
-        # white redraw at its total level made a periodic floor 3.6 x the gap of a null log
-        lvl = band_noise_psd(rows["qd"], h, NOISE_BAND[0] * f_b, NOISE_BAND[1] * f_b)[0]
-        sig_qd = np.minimum(angle_noise(rows["qd"]), np.sqrt(lvl / (2.0 * h)))
-    lag = velocity_lag(q_raw, rows["qd"], h, fc) if velocity_only else 0.0
-    if abs(lag) > VELOCITY_LAG_MIN * h:
-        # velocities logged late (a backward difference of the encoder: half a sample) against the
-        # angles they come with: the model would see a velocity and an acceleration that lag the
-        # posture, a repeating error no floor holds (1 % of the torque on a planar arm)
-        rows["qd"] = shift(rows["qd"], t, -lag)
-    q, qd, qdd = derive(q_raw, rows.get("qd"))
-    tau = zero_phase_lowpass(tau_raw, h, fc)
-    # noise of the filtered torque: the raw torque's PSD above the band (measured), extrapolated
-    # flat below 1.5 x the band, times the filter's power gain
-    f_m_report = f_m
-    f_m = f_b
-    level, f, P = band_noise_psd(tau_raw, h, NOISE_BAND[0] * f_m, NOISE_BAND[1] * f_m)
-    g = lowpass_power_gain(f, h, fc)
-    df = f[1] - f[0]
-    hi = f > NOISE_BAND[0] * f_m
-    var_tau = (P[hi] * g[hi, None]).sum(axis=0) * df + level * (g[~hi].sum() * df)
-    rng = np.random.default_rng(0)
-    F, Y = on_rows(_rigid_batch, (robot,), (q, qd, qdd))
-    dev = []
-    for _ in range(NOISE_DRAWS):
-        qk, qdk, qddk = derive(q_raw + sig_draw * rng.standard_normal(q_raw.shape),
-                               None if sig_qd is None else rows["qd"] + sig_qd * rng.standard_normal(q_raw.shape))
-        dev.append(on_rows(_id_batch, (robot,), (qk, qdk, qddk)) - F)
-    var_q = np.mean([d.var(axis=0) for d in dev], axis=0)
-    k = int(decimate)
-    # the filter's start and end transients (zero-phase: both ends) are cut off the record
-    edge = int(np.ceil(EDGE_PERIODS / fc / h))
-    if t.size - 2 * edge < 20 * k:
-        raise DataError(f"{ds.name}: field 't': the record ({t[-1] - t[0]:.3g} s) is too short for its low-pass at "
-                        f"{fc:.3g} Hz, whose transients take {edge * h:.3g} s at each end")
-    sl = slice(edge, t.size - edge, k)
-    weight = None
-    if valid is not None:
-        # a masked sample reaches its neighbours through the filter: one period of the cutoff each way
-        from scipy.ndimage import minimum_filter1d
-
-        reach = int(np.ceil(1.0 / (fc * h)))
-        weight = minimum_filter1d((rows["tau_valid"] >= 1.0 - 1e-9).astype(float), 2 * reach + 1, axis=0,
-                                  mode="nearest")[sl]
-    processing = {"angle_noise_rad": sig_q.tolist(), "motion_band_hz": f_m_report, "cutoff_hz": fc, "decimate": k,
-                  "cutoff_method": cut["method"], "cutoff": cut, "sampling": sampling,
-                  "velocity_lag_s": lag if abs(lag) > VELOCITY_LAG_MIN * h else 0.0,
+    log = process_angle_log(t, rows, ds.name, cutoff_hz=cutoff_hz, decimate=decimate, velocity_only=velocity_only)
+    F, Y = on_rows(_rigid_batch, (robot,), (log.q, log.qd, log.qdd))
+    var_q = propagated_noise(log, lambda qk, qdk, qddk: on_rows(_id_batch, (robot,), (qk, qdk, qddk)) - F)
+    sl, weight, edge = trimmed(log, ds.name, decimate)
+    h, fc, lag, var_tau = log.h, log.cutoff, log.lag, log.torque_variance
+    processing = {"angle_noise_rad": log.angle_noise.tolist(), "motion_band_hz": log.motion_band, "cutoff_hz": fc,
+                  "decimate": int(decimate), "cutoff_method": log.cutoff_info["method"], "cutoff": log.cutoff_info,
+                  "sampling": log.sampling, "velocity_lag_s": lag if abs(lag) > VELOCITY_LAG_MIN * h else 0.0,
                   "derivatives": "velocities filtered, then differentiated" if velocity_only else
                   "angles filtered, then differentiated twice", "trimmed_s": edge * h,
                   "torque_noise_nm": np.sqrt(var_tau).tolist(), "propagated_angle_noise_nm": np.sqrt(var_q).tolist()}
     if weight is not None:
         processing["masked_fraction"] = (1.0 - weight.mean(axis=0)).tolist()
-    return TorqueSet(ds.name, t[sl], q[sl], qd[sl], qdd[sl], tau[sl], F[sl], _spread(tau[sl], weight), Y[sl],
-                     rows["q_extra"][sl], ds.extra_joints, robot, cutoff=fc, noise=np.sqrt(var_tau + var_q),
-                     processing=processing, weight=weight)
+    return TorqueSet(ds.name, log.t[sl], log.q[sl], log.qd[sl], log.qdd[sl], log.tau[sl], F[sl],
+                     _spread(log.tau[sl], weight), Y[sl], log.rows["q_extra"][sl], ds.extra_joints, robot, cutoff=fc,
+                     noise=np.sqrt(var_tau + var_q), processing=processing, weight=weight)
 
 
 def _spread(tau, weight=None) -> np.ndarray:
@@ -266,19 +185,6 @@ def _spread(tau, weight=None) -> np.ndarray:
         x = tau[weight[:, j] > 0, j]
         out[j] = x.std() if x.size > 1 else 0.0
     return np.maximum(out, 1e-9)
-
-
-def shift(X, t, d):
-    """``S_d X``: the signal delayed by ``d`` [s], of either sign (negative: advanced), by linear
-    interpolation; the samples the shift leaves without data hold the record's first value (``d >
-    0``) or its last (``d < 0``)."""
-    if d == 0:
-        return X
-    flat = X.reshape(X.shape[0], -1)
-    out = np.empty_like(flat)
-    for k in range(flat.shape[1]):
-        out[:, k] = np.interp(t - d, t, flat[:, k])
-    return out.reshape(X.shape)
 
 
 class TorqueTerm:
