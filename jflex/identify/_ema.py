@@ -10,6 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._errors import DataError
+from ..data._peaks import pick_peaks
 from ..data._validate import check_finite
 
 
@@ -110,38 +111,7 @@ def peak_picking(freq, H, n_modes: int | None = None, *, freq_range=None, promin
     if A.shape[0] != freq.shape[0]:
         raise DataError(f"peak_picking: freq has {freq.shape[0]} points but H has {A.shape[0]}")
     mask = np.ones_like(freq, bool) if freq_range is None else (freq >= freq_range[0]) & (freq <= freq_range[1])
-    Am = np.where(mask, A, 0.0)
-    import scipy.signal
-
-    pk, props = scipy.signal.find_peaks(Am, prominence=prominence * Am.max())
-    if n_modes is not None and len(pk) > n_modes:
-        pk = np.sort(pk[np.argsort(-props["prominences"])[:n_modes]])
-    fn, zeta = [], []
-    for k in pk:
-        half = A[k] / np.sqrt(2)
-        i = k
-        while i > 0 and A[i] > half:
-            i -= 1
-        j = k
-        while j < len(A) - 1 and A[j] > half:
-            j += 1
-        if A[i] > half or A[j] > half:
-            zeta.append(np.nan)
-        else:
-            f1 = freq[i] + (half - A[i]) * (freq[i + 1] - freq[i]) / (A[i + 1] - A[i])
-            f2 = freq[j - 1] + (half - A[j - 1]) * (freq[j] - freq[j - 1]) / (A[j] - A[j - 1])
-            # Refine the peak by a parabola through the three bins around it.
-            fn_k = freq[k]
-            if 0 < k < len(A) - 1:
-                a, b, c = A[k - 1], A[k], A[k + 1]
-                d = a - 2 * b + c
-                if d != 0:
-                    fn_k = freq[k] + 0.5 * (a - c) / d * (freq[k + 1] - freq[k])
-            zeta.append((f2 - f1) / (2 * fn_k))
-            fn.append(fn_k)
-            continue
-        fn.append(freq[k])
-    return np.asarray(fn), np.asarray(zeta), np.asarray(pk)
+    return pick_peaks(freq, A, prominence, search=np.where(mask, A, 0.0), n_modes=n_modes)
 
 
 class LSCFResult(NamedTuple):

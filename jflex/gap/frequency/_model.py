@@ -87,27 +87,16 @@ def _frf_norm(a):
 
 
 def frf_peaks(freq, H, prominence=0.03):
-    """Peaks of the summed normalised magnitude of a measured FRF: (f [Hz], zeta) by peak picking,
-    parabolic refinement and the half-power bandwidth (NaN when a half-power point is off the grid)."""
-    from scipy.signal import find_peaks
+    """Peaks of the summed normalised magnitude of a measured FRF (smoothed over three lines):
+    (f [Hz], zeta) by peak picking and the half-power bandwidth on the frequency grid (NaN when a
+    half-power point is off the grid; :func:`jflex.data._peaks.pick_peaks`)."""
+    from ...data._peaks import pick_peaks
 
     s = frf_scale(H)
     ok = frf_entries(H)
     mag = (np.abs(H[:, ok]) / s[ok]).sum(axis=1)
     mag = np.convolve(np.pad(mag, 1, mode="edge"), np.ones(3) / 3, mode="valid")
-    pk, _ = find_peaks(mag, prominence=prominence * mag.max())
-    fs, zs = [], []
-    for k in pk:
-        level = mag[k] / np.sqrt(2)
-        lo = k
-        while lo > 0 and mag[lo] > level:
-            lo -= 1
-        hi = k
-        while hi < len(mag) - 1 and mag[hi] > level:
-            hi += 1
-        fs.append(freq[k])
-        zs.append((freq[hi] - freq[lo]) / (2 * freq[k]) if lo > 0 and hi < len(mag) - 1 else np.nan)
-    return np.array(fs), np.array(zs)
+    return pick_peaks(freq, mag, prominence, half_power="grid")[:2]
 
 
 PEAK_WEIGHT = 1.0  # FRF training sets also enter through their picked peaks (smooth in log k)
