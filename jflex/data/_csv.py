@@ -148,20 +148,10 @@ def motor_angles(q, order, spec, case_file, fld):
     return q
 
 
-def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
-    """The :class:`Record` of the CSV data set ``spec`` (a validated ``datasets[i]`` of case.yaml)
-    read from ``paths`` (one file, or several files of one run merged on time)."""
-    paths = [pathlib.Path(p) for p in (paths if isinstance(paths, (list, tuple)) else [paths])]
-    tables = _tables(paths, spec, case_file, fld)
-    cols, scale, offset, units = spec.columns, spec.scale or {}, getattr(spec, "offset", None) or {}, spec.units
-    pos_unit = units.position if units is not None else "rad"
-    time_unit = units.time if units is not None else "s"
-    ang = np.pi / 180 if pos_unit == "deg" else 1.0
-    names = list(robot.joint_names)
-    header = [h for tb in tables for h in tb.header]
-    label = paths[0].name if len(paths) == 1 else ", ".join(p.name for p in paths)
-
-    mapped = {}  # column -> its field in case.yaml
+def _mapped(cols, scale, offset, header, label, case_file, fld) -> dict:
+    """``{column: its field in case.yaml}`` of the column map ``cols``; every mapped column must be
+    in the files' ``header``, every scaled or offset one mapped."""
+    mapped = {}
     for key in type(cols).model_fields:
         v = getattr(cols, key)
         for sub, c in ({None: v} if isinstance(v, str) else (v or {})).items():
@@ -175,7 +165,13 @@ def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
             if c not in mapped:
                 raise ConfigError(f"{case_file}: field '{fld}.{key}.{c}': column {c!r} is not mapped in columns "
                                   f"(mapped: {sorted(mapped)})")
-    time_col = cols.time if spec.kind != "modal" else None
+    return mapped
+
+
+def _values(tables, mapped, scale, offset, spec, time_col, time_unit, case_file, fld):
+    """``(values, stamps, merge report)``: each mapped column's values (minus its offset, times
+    its scale), the files of one run merged on time (the stamps [s] of a merged log without a time
+    column, else None; the report None for one file)."""
     rate = getattr(spec, "rate", None)  # a log without a time column: row k at k / rate seconds
 
     def raw(tb, c, finite=True):
@@ -186,94 +182,94 @@ def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
             raise DataError(f"{tb.path}: column {c!r} ({mapped[c]}), line {k}: empty or not finite")
         return v
 
-    finite_ok = {cols.damping_ratio} if spec.kind == "modal" else set()
+    finite_ok = {spec.columns.damping_ratio} if spec.kind == "modal" else set()
     if len(tables) == 1:
-        vals = {c: raw(tables[0], c, c not in finite_ok) for c in mapped}
-        merge_report = None
-    else:
-        if time_col is None and rate is None:
-            raise ConfigError(f"{case_file}: field '{fld}.file': a {spec.kind} data set is one file")
-        parts = []
-        for tb in tables:
-            if time_col is None:
-                own = {c: raw(tb, c) for c in mapped if c in tb.header}
-                parts.append((tb.path.name, np.arange(len(tb.rows)) / rate, own))
-                continue
-            if time_col not in tb.header:
-                raise ConfigError(f"{case_file}: field '{fld}.columns.time': column {time_col!r} is not in "
-                                  f"{tb.path.name}: every file of a merged data set holds the time column")
-            own = {c: raw(tb, c) for c in mapped if c in tb.header and c != time_col}
-            parts.append((tb.path.name, raw(tb, time_col) * TIME_UNITS[time_unit], own))
-        t_m, vals, merge_report = merge_on_time(parts, f"{case_file}: {fld}")
+        return {c: raw(tables[0], c, c not in finite_ok) for c in mapped}, None, None
+    if time_col is None and rate is None:
+        raise ConfigError(f"{case_file}: field '{fld}.file': a {spec.kind} data set is one file")
+    parts = []
+    for tb in tables:
         if time_col is None:
-            t_rows = t_m
-        else:
-            vals[time_col] = t_m / TIME_UNITS[time_unit]
-
-    def col(c, factor=1.0):
-        return vals[c] * factor
-
-    def block(key, order, factor=1.0):
-        return np.column_stack([col(getattr(cols, key)[j], factor) for j in order])
-
-    def keys_as(key, allowed, what):
-        got = list(getattr(cols, key))
-        for j in got:
-            if j not in allowed:
-                raise ConfigError(f"{case_file}: field '{fld}.columns.{key}.{j}': unknown {what} {j!r}; "
-                                  f"expected one of {list(allowed)}")
-        return got
-
-    channels = {}
-
-    def note(field, j, c, unit):
-        channels[f"{field}:{j}"] = Channel(f"{field}:{j}", unit, f"{label}:{c}", scale.get(c, 1.0), offset.get(c, 0.0))
-
-    conditioning = {"merge": merge_report} if merge_report else {}
-    if spec.kind == "modal":
-        out = yaml_posture(spec, robot, case_file, fld, ang)
-        out.update(freq=col(cols.frequency), zeta=col(cols.damping_ratio))
-        return Record(out, channels, conditioning)
+            own = {c: raw(tb, c) for c in mapped if c in tb.header}
+            parts.append((tb.path.name, np.arange(len(tb.rows)) / rate, own))
+            continue
+        if time_col not in tb.header:
+            raise ConfigError(f"{case_file}: field '{fld}.columns.time': column {time_col!r} is not in "
+                              f"{tb.path.name}: every file of a merged data set holds the time column")
+        own = {c: raw(tb, c) for c in mapped if c in tb.header and c != time_col}
+        parts.append((tb.path.name, raw(tb, time_col) * TIME_UNITS[time_unit], own))
+    t_m, vals, merge_report = merge_on_time(parts, f"{case_file}: {fld}")
     if time_col is None:
-        t = np.arange(len(tables[0].rows)) / rate if len(tables) == 1 else t_rows
+        return vals, t_m, merge_report
+    vals[time_col] = t_m / TIME_UNITS[time_unit]
+    return vals, None, merge_report
+
+
+class _Columns:
+    """The values of a data set's mapped columns, read by joint, each read noted as a
+    :class:`Channel` (unit, source column, scale, offset)."""
+
+    def __init__(self, vals, cols, scale, offset, label):
+        self.vals, self.cols, self.scale, self.offset, self.label = vals, cols, scale, offset, label
+        self.channels = {}
+
+    def col(self, c, factor=1.0):
+        return self.vals[c] * factor
+
+    def block(self, key, order, factor=1.0):
+        return np.column_stack([self.col(getattr(self.cols, key)[j], factor) for j in order])
+
+    def note(self, field, j, c, unit):
+        self.channels[f"{field}:{j}"] = Channel(f"{field}:{j}", unit, f"{self.label}:{c}", self.scale.get(c, 1.0),
+                                                self.offset.get(c, 0.0))
+
+
+def _torque_fields(v: _Columns, spec, names, t, ang, case_file, fld) -> dict:
+    """A torque log's fields: angles (and rates) of its position joints, joint torques."""
+    cols = spec.columns
+    pk = list(cols.position)
+    missing = [j for j in names if j not in pk]
+    if missing:
+        raise ConfigError(f"{case_file}: field '{fld}.columns.position': no column for model joints {missing} "
+                          f"(the model has joints {names})")
+    tk = list(cols.torque)
+    if set(tk) == set(pk):
+        torder = pk
+    elif set(tk) == set(names):
+        torder = names if len(pk) != len(names) else pk
     else:
-        t = col(time_col, TIME_UNITS[time_unit])
-    if spec.kind == "torque":
-        pk = list(cols.position)
-        missing = [j for j in names if j not in pk]
-        if missing:
-            raise ConfigError(f"{case_file}: field '{fld}.columns.position': no column for model joints {missing} "
-                              f"(the model has joints {names})")
-        tk = list(cols.torque)
-        if set(tk) == set(pk):
-            torder = pk
-        elif set(tk) == set(names):
-            torder = names if len(pk) != len(names) else pk
-        else:
-            raise ConfigError(f"{case_file}: field '{fld}.columns.torque': expected a column for every model joint "
-                              f"{names} (or for every position joint {pk}), got {tk}")
-        for j in pk:
-            note("q", j, cols.position[j], "rad")
-        for j in torder:
-            note("tau", j, cols.torque[j], "N m")
-        tau = transmission(block("torque", torder), torder, spec, case_file, fld)
-        out = {"t": t, "q": motor_angles(block("position", pk, ang), pk, spec, case_file, fld), "tau": tau,
-               "joints": np.asarray(pk)}
-        for key, name in (("velocity", "qd"), ("acceleration", "qdd")):
-            if getattr(cols, key) is not None:
-                if set(getattr(cols, key)) != set(pk):
-                    raise ConfigError(f"{case_file}: field '{fld}.columns.{key}': expected the joints of "
-                                      f"columns.position {pk}, got {list(getattr(cols, key))}")
-                out[name] = motor_angles(block(key, pk, ang), pk, spec, case_file, fld)
-        return Record(out, channels, conditioning)
-    # response: applied torques at every model joint, measured channels
-    tk = keys_as("torque", names, "model joint")
+        raise ConfigError(f"{case_file}: field '{fld}.columns.torque': expected a column for every model joint "
+                          f"{names} (or for every position joint {pk}), got {tk}")
+    for j in pk:
+        v.note("q", j, cols.position[j], "rad")
+    for j in torder:
+        v.note("tau", j, cols.torque[j], "N m")
+    tau = transmission(v.block("torque", torder), torder, spec, case_file, fld)
+    out = {"t": t, "q": motor_angles(v.block("position", pk, ang), pk, spec, case_file, fld), "tau": tau,
+           "joints": np.asarray(pk)}
+    for key, name in (("velocity", "qd"), ("acceleration", "qdd")):
+        if getattr(cols, key) is not None:
+            if set(getattr(cols, key)) != set(pk):
+                raise ConfigError(f"{case_file}: field '{fld}.columns.{key}': expected the joints of "
+                                  f"columns.position {pk}, got {list(getattr(cols, key))}")
+            out[name] = motor_angles(v.block(key, pk, ang), pk, spec, case_file, fld)
+    return out
+
+
+def _response_fields(v: _Columns, spec, robot, names, t, ang, case_file, fld) -> dict:
+    """A response log's fields: applied torques at every model joint, measured channels."""
+    cols = spec.columns
+    tk = list(cols.torque)
+    for j in tk:
+        if j not in names:
+            raise ConfigError(f"{case_file}: field '{fld}.columns.torque.{j}': unknown model joint {j!r}; "
+                              f"expected one of {list(names)}")
     if set(tk) != set(names):
         raise ConfigError(f"{case_file}: field '{fld}.columns.torque': expected a column for every model joint "
                           f"{names}, got {tk}")
     ch = list(cols.output)
-    out = {"t": t, "tau": transmission(block("torque", names), names, spec, case_file, fld), "channels": np.asarray(ch),
-           "y": np.column_stack([col(cols.output[c], ang if c in names else 1.0) for c in ch])}
+    out = {"t": t, "tau": transmission(v.block("torque", names), names, spec, case_file, fld), "channels": np.asarray(ch),
+           "y": np.column_stack([v.col(cols.output[c], ang if c in names else 1.0) for c in ch])}
     if spec.q0 is not None:
         q0 = yaml_posture(spec, robot, case_file, fld, ang)
         if "joints" in q0:
@@ -282,7 +278,37 @@ def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
     elif not all(j in ch for j in names):
         raise ConfigError(f"{case_file}: field '{fld}.q0': missing (the outputs do not name every model joint "
                           f"{names}: the model is simulated from rest at q0)")
-    return Record(out, channels, conditioning)
+    return out
+
+
+def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
+    """The :class:`Record` of the CSV data set ``spec`` (a validated ``datasets[i]`` of case.yaml)
+    read from ``paths`` (one file, or several files of one run merged on time)."""
+    paths = [pathlib.Path(p) for p in (paths if isinstance(paths, (list, tuple)) else [paths])]
+    tables = _tables(paths, spec, case_file, fld)
+    cols, scale, offset, units = spec.columns, spec.scale or {}, getattr(spec, "offset", None) or {}, spec.units
+    pos_unit = units.position if units is not None else "rad"
+    time_unit = units.time if units is not None else "s"
+    ang = np.pi / 180 if pos_unit == "deg" else 1.0
+    names = list(robot.joint_names)
+    header = [h for tb in tables for h in tb.header]
+    label = paths[0].name if len(paths) == 1 else ", ".join(p.name for p in paths)
+    mapped = _mapped(cols, scale, offset, header, label, case_file, fld)
+    time_col = cols.time if spec.kind != "modal" else None
+    vals, t_rows, merge_report = _values(tables, mapped, scale, offset, spec, time_col, time_unit, case_file, fld)
+    v = _Columns(vals, cols, scale, offset, label)
+    conditioning = {"merge": merge_report} if merge_report else {}
+    if spec.kind == "modal":
+        out = yaml_posture(spec, robot, case_file, fld, ang)
+        out.update(freq=v.col(cols.frequency), zeta=v.col(cols.damping_ratio))
+        return Record(out, v.channels, conditioning)
+    if time_col is None:
+        t = np.arange(len(tables[0].rows)) / getattr(spec, "rate", None) if len(tables) == 1 else t_rows
+    else:
+        t = v.col(time_col, TIME_UNITS[time_unit])
+    if spec.kind == "torque":
+        return Record(_torque_fields(v, spec, names, t, ang, case_file, fld), v.channels, conditioning)
+    return Record(_response_fields(v, spec, robot, names, t, ang, case_file, fld), v.channels, conditioning)
 
 
 def csv_arrays(path, spec, robot, case_file, fld: str) -> dict:

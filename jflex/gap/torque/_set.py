@@ -22,7 +22,6 @@ import numpy as np
 import scipy.optimize as so
 
 from ..._dynamics import rnea
-from ..._errors import DataError
 from ..._sweep import flagged_vmap
 from ...data._angle_log import VELOCITY_LAG_MIN, process_angle_log, propagated_noise, trimmed
 from ...data._condition import CUTOFF_FACTOR as CUTOFF_FACTOR  # the torque terms' own low-pass reads it here
