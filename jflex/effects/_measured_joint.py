@@ -4,7 +4,8 @@ rigid links do; added to a :class:`jflex.Model` they leave its equations of moti
 (DriveGain scales the actuation) and give the relation as methods on measured signals, the form
 in which the gap diagnosis fits them along a measured motion.
 
-The laws are NumPy functions, written once here: the diagnosis' candidate columns call them.
+The laws are NumPy functions, written once here (a delayed sensor's shift is the data layer's
+:func:`jflex.data._signal.shift`): the diagnosis' candidate columns call them.
 """
 
 from __future__ import annotations
@@ -14,6 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ParameterError
+# a sensor delayed by d reads the signal shifted by the data layer's shift operator S_d (linear
+# interpolation; the samples left without data hold the record's first or last value)
+from ..data._signal import shift as delayed
 from ._base import AbstractEffect, Slots, joint_indices
 from ._flexible_joint import _concrete
 
@@ -50,19 +54,6 @@ def first_order_zero_phase(x, t, tau):
 
     a = np.exp(-np.mean(np.diff(t)) / tau)
     return ss.filtfilt([1 - a], [1, -a], np.asarray(x, float), padtype="constant", padlen=0) if len(x) > 6 else np.asarray(x)
-
-
-def delayed(X, t, d):
-    """``X`` (N, ...) sampled at ``t`` as a sensor delayed by ``d`` [s] reads it, of either sign
-    (negative: advanced), by linear interpolation; the samples the shift leaves without data hold
-    the record's first value (``d > 0``) or its last (``d < 0``)."""
-    if d == 0:
-        return X
-    flat = X.reshape(X.shape[0], -1)
-    out = np.empty_like(flat)
-    for k in range(flat.shape[1]):
-        out[:, k] = np.interp(t - d, t, flat[:, k])
-    return out.reshape(X.shape)
 
 
 def scaled_torque(tau, gain):
