@@ -42,6 +42,7 @@ from .judge._signatures import indistinguishable_from_inertia, n_params, signatu
 from .torque._scale import scale_reason, torque_scale_suspects
 from .judge._where import where
 from ._verdict import final_verdict
+from ..effects._registry import JOINT_FLEXIBILITY
 
 
 def diagnose(case, *, candidates=(), max_effects: int | None = None, prune: int = 10, progress=None) -> Diagnosis:
@@ -262,7 +263,7 @@ def _refine(run: _Run, step):
     pb, floor = run.pb, run.floor.per_dataset
     j = step.cand.joint
     # (play inside a spring is identified before it is judged: Problem.add)
-    if step.cand.effect != "joint_flexibility" or j not in dict(step.state.springs):
+    if step.cand.effect != JOINT_FLEXIBILITY or j not in dict(step.state.springs):
         return step.state, step.ev
     run.say(f"identifying the spring at {pb.names[j]} through the simulation")
     st = pb.polish(step.state, [j])
@@ -318,7 +319,7 @@ def _rivals(run: _Run, c: Candidate) -> list:
     nested = [k for k in keep if _richer(k, c)]
     return nested + [k for k in keep if k != c and k.joint == c.joint and k.effect != c.effect
                      and NESTED.get(k.effect) != c.effect and NESTED.get(c.effect) != k.effect
-                     and k.effect != "joint_flexibility" and not pb.screened_by_simulation(run.nom, k)
+                     and k.effect != JOINT_FLEXIBILITY and not pb.screened_by_simulation(run.nom, k)
                      and abs(alone.get(k, -1e9) - alone.get(c, 1e9)) < SWAP_SHRINK][:2]
 
 
@@ -329,7 +330,7 @@ def _swap(run: _Run, sel, mg: _Margins):
     simulation is not). Returns the selection and the swaps made."""
     pb = run.pb
     swaps = []
-    if sel.steps and not any(st.cand.effect == "joint_flexibility" or pb.screened_by_simulation(run.nom, st.cand)
+    if sel.steps and not any(st.cand.effect == JOINT_FLEXIBILITY or pb.screened_by_simulation(run.nom, st.cand)
                              for st in sel.steps):
         sel, swaps = swap_rivals(sel, run.ev0, run.floor.per_dataset, functools.partial(_rivals, run),
                                  functools.partial(_refit, run), n_params=functools.partial(_n_params, pb),

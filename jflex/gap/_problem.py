@@ -23,14 +23,9 @@ from .response import _response as R
 from .torque import _set as T
 from .torque._scale import dead_channels
 from .torque._terms import KINDS, make_term
+from ..effects._registry import CONFOUNDED, BACKLASH, JOINT_FLEXIBILITY, PAYLOAD, ROTOR_INERTIA
 
 TORQUE_EFFECTS = tuple(KINDS)
-# pairs a single data set cannot always tell apart: reported as ambiguous when close
-CONFOUNDED = {frozenset(p) for p in [("sensor_delay", "viscous_friction"), ("payload", "joint_flexibility"),
-                                     ("payload", "rotor_inertia"), ("coulomb_friction", "hysteretic_damping"),
-                                     ("coulomb_friction", "backlash"), ("coulomb_friction", "stribeck_friction"),
-                                     ("orthogonal_compliance", "link_flexibility"),
-                                     ("fractional_damping", "hysteretic_damping")]}
 DEFAULT_OPTIONS = {"inertia_prior": 1.0, "refit_inertia": True, "filter_cutoff_hz": "auto", "decimate": 1,
                    "max_effects": 3}
 
@@ -118,7 +113,7 @@ class Problem:
         # side of a simulated spring when no torque training set fits it
         self.rotor_nominal = np.zeros(self.n)
         for e in case.nominal_effects:
-            if e["effect"] == "rotor_inertia" and "value" in e:
+            if e["effect"] == ROTOR_INERTIA and "value" in e:
                 for j, v in zip(e["joints"], e["value"]):
                     self.rotor_nominal[self.names.index(j)] = v
 
@@ -211,7 +206,7 @@ class Problem:
         if self.ftrain or self.fval:
             springs, x0 = [], []
             for e in self.nominal_effects:
-                if e["effect"] == "joint_flexibility":
+                if e["effect"] == JOINT_FLEXIBILITY:
                     for j in e["joints"]:
                         springs.append(L.Site("joint", self.names.index(j)))
                     k = e.get("stiffness", np.full(len(e["joints"]), 1e5))
@@ -304,20 +299,20 @@ class Problem:
             out += [Candidate(name, None) for name, k in kinds.items() if not k.per_joint and k.tried_at(self, None, flex)]
         if self.rtrain and self.rval:
             flex = {s.where for s in self._nominal_springs()}
-            out += [Candidate("joint_flexibility", j) for j in range(self.n) if j not in flex]
+            out += [Candidate(JOINT_FLEXIBILITY, j) for j in range(self.n) if j not in flex]
             # play inside a spring: tried at every joint, a no-op until a spring is placed there
-            out += [Candidate("backlash", j) for j in range(self.n) if ("backlash", j) not in self.nominal]
+            out += [Candidate(BACKLASH, j) for j in range(self.n) if (BACKLASH, j) not in self.nominal]
         return list(dict.fromkeys(out))
 
     def _nominal_springs(self):
         return [L.Site("joint", self.names.index(j)) for e in self.nominal_effects
-                if e["effect"] == "joint_flexibility" for j in e["joints"]]
+                if e["effect"] == JOINT_FLEXIBILITY for j in e["joints"]]
 
     def changes(self, state: State, cand: Candidate) -> bool:
         """False for a candidate that adds nothing to ``state``: backlash on tip records alone is
         play inside a spring the simulation holds, and there is none at its joint yet (it becomes a
         candidate once a spring is placed there; until then it is neither refitted nor ranked)."""
-        if cand.effect != "backlash" or self.ttrain or not (self.rtrain and self.rval):
+        if cand.effect != BACKLASH or self.ttrain or not (self.rtrain and self.rval):
             return True
         if self.ftrain and state.lm is not None:
             return False  # FRF/modal data place the springs: no tip-side play on them (see add)
@@ -328,7 +323,7 @@ class Problem:
         a new compiled simulation each time it is tried on a new base model. (On output-error
         records ``backlash`` is play inside a spring the simulation holds, screened and identified
         with it, :meth:`add`; the torque side's backlash, on torque records, is its own term.)"""
-        return cand.effect == "joint_flexibility" and bool(self.rtrain) and not (self.ftrain and state.lm is not None)
+        return cand.effect == JOINT_FLEXIBILITY and bool(self.rtrain) and not (self.ftrain and state.lm is not None)
 
     # --- refits --------------------------------------------------------------------------------
     def add(self, state: State, cand: Candidate) -> State:
@@ -342,7 +337,7 @@ class Problem:
         if kind is not None and self.ftrain and lm is not None:
             lm, x = kind.add(self, lm, x, cand.joint)
         springs = state.springs
-        if cand.effect == "backlash" and self.rtrain and self.rval and not (self.ftrain and lm is not None):
+        if cand.effect == BACKLASH and self.rtrain and self.rval and not (self.ftrain and lm is not None):
             # play inside the spring the simulation holds at the joint (none there yet: nothing to add)
             held = State(tfit, lm, x, state.added, springs)
             sp = self.sim_springs(held)
@@ -424,7 +419,7 @@ class Problem:
                 out[s.where] = (k, c)
             return out
         for e in self.nominal_effects:
-            if e["effect"] == "joint_flexibility" and "stiffness" in e:
+            if e["effect"] == JOINT_FLEXIBILITY and "stiffness" in e:
                 c = e.get("damping", 1e-3 * e["stiffness"])
                 for j, kj, cj in zip(e["joints"], e["stiffness"], c):
                     if kj > 0:
@@ -565,7 +560,7 @@ def parameters(pb: Problem, st: State) -> dict:
                 if type(s.law).shape:
                     lin[nm][type(s.law).shape[0]] = float(getattr(s.law, type(s.law).shape[0]))
         if st.lm.structure.payload:
-            lin["payload"] = st.lm.payload_parameters(st.x)
+            lin[PAYLOAD] = st.lm.payload_parameters(st.x)
         for (a, b), r in zip(st.lm.pairs, st.lm.coupling(st.x)):
             nm = {"orth": f"{pb.names[sp[b].where]}_orth", "link": f"{pb.robot.link_names[sp[b].where]}_bend"}[sp[b].kind]
             lin[nm + "_coupling"] = {"r = k_ab / sqrt(k_a k_b)": float(r)}

@@ -15,6 +15,7 @@ from pydantic_core import PydanticCustomError
 from ..._schema import Strict, markdown_table
 from ..frequency._kinds import frequency_kinds
 from ..torque._terms import KINDS as TORQUE_KINDS
+from ...effects._registry import JOINT_FLEXIBILITY, ROTOR_INERTIA, SENSOR_DELAY
 
 KINDS = ("torque", "frf", "modal", "response")
 SPLITS = ("train", "validation")
@@ -24,7 +25,7 @@ SPLITS = ("train", "validation")
 # named from the same list.
 EFFECT_NAMES = tuple(dict.fromkeys([*TORQUE_KINDS, *frequency_kinds()]))
 # nominal values an effect may state (every other coefficient is fitted)
-EFFECT_VALUES = {"joint_flexibility": ("stiffness", "damping"), "sensor_delay": ("value",), "rotor_inertia": ("value",)}
+EFFECT_VALUES = {JOINT_FLEXIBILITY: ("stiffness", "damping"), SENSOR_DELAY: ("value",), ROTOR_INERTIA: ("value",)}
 
 # data file formats by suffix (a ROS 2 bag may also be a folder holding metadata.yaml, see
 # file_format); which kinds each carries

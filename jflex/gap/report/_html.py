@@ -15,6 +15,7 @@ import pathlib
 import numpy as np
 
 from ..judge._selection import MIN_NAMED_SHRINK, MIN_STEP_SHRINK, vetoed
+from ...effects._registry import LINK_FLEXIBILITY, ORTHOGONAL_COMPLIANCE, PAYLOAD
 
 SECTIONS = {
     "summary": "Verdict",
@@ -229,8 +230,8 @@ def significance_words(significant: bool) -> str:
 def payload_summary(params: dict, robot, tool_frame) -> dict | None:
     """The fitted payload as mass [kg] and centre of mass [m] in the tool frame (or the last link's
     frame when the case names no tool frame on it); None when no payload was fitted."""
-    if "payload" in params.get("torque", {}):
-        p = params["torque"]["payload"]
+    if PAYLOAD in params.get("torque", {}):
+        p = params["torque"][PAYLOAD]
         m = float(p["m [kg]"])
         mc = np.array([p["m cx [kg m]"], p["m cy [kg m]"], p["m cz [kg m]"]], dtype=float)
         why = _nonphysical(m, mc, p)
@@ -248,8 +249,8 @@ def payload_summary(params: dict, robot, tool_frame) -> dict | None:
                 pos = np.asarray(robot.frame_p[k]) if k >= 0 else np.zeros(3)
                 c, frame = R.T @ (c_link - pos), f"tool frame '{tool_frame}'"
         return dict(mass_kg=m, com_m=c.tolist(), frame=frame, side="torque data (10 inertial parameters fitted)")
-    if "payload" in params.get("linear", {}):
-        p = params["linear"]["payload"]
+    if PAYLOAD in params.get("linear", {}):
+        p = params["linear"][PAYLOAD]
         m = float(p["mass [kg]"])
         com = [float(v) for v in p.get("com (tool frame) [m]", (0.0, 0.0, 0.0))]
         what = {1: "a point mass at the tool frame's origin", 4: "a point mass: its mass and centre of mass"}.get(
@@ -291,10 +292,10 @@ def payload_line(pl: dict) -> str:
 def _group_label(side: str, key: str) -> str:
     """The effect a parameter group belongs to, in the candidates' ``effect@where`` form (the
     frequency side keys its springs by joint, ``<joint>_orth`` and ``<link>_bend``)."""
-    if side != "linear" or "@" in key or key == "payload":
+    if side != "linear" or "@" in key or key == PAYLOAD:
         return key
     for suffix, effect in (("_orth_coupling", "coupling of orthogonal_compliance"), ("_bend_coupling", "coupling of link_flexibility"),
-                           ("_orth", "orthogonal_compliance"), ("_bend", "link_flexibility")):
+                           ("_orth", ORTHOGONAL_COMPLIANCE), ("_bend", LINK_FLEXIBILITY)):
         if key.endswith(suffix):
             return f"{effect}@{key[: -len(suffix)]}"
     return f"joint_flexibility@{key}"
@@ -426,7 +427,7 @@ def _page_model(H: list, r: dict, nominal_effects, payload) -> None:
             tag = ("<span class='tag nominal'>nominal</span>" if g in nominal_p.get(side, {})
                    else "<span class='tag added'>added</span>")
             before, after = nominal_p.get(side, {}).get(g, {}), final_p.get(side, {}).get(g, {})
-            if g == "payload" and payload:
+            if g == PAYLOAD and payload:
                 rows.append([f"{_e(g)} {tag}", "mass, centre of mass", "-", _e(payload_line(payload))])
                 continue
             for k in dict.fromkeys(list(before) + list(after)):

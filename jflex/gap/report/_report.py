@@ -10,6 +10,7 @@ from ..._runs import write_results
 from . import _figures as FG
 from . import _html
 from ..judge._selection import vetoed
+from ...effects._registry import PAYLOAD
 
 
 def robot_name(case) -> str:
@@ -337,7 +338,7 @@ def _md_model(r: dict, plots, payload, prismatic) -> list[str]:
 def _without_payload(params: dict, payload) -> dict:
     if not payload:
         return params
-    return {side: {k: v for k, v in grp.items() if k != "payload"} if isinstance(grp, dict) else grp
+    return {side: {k: v for k, v in grp.items() if k != PAYLOAD} if isinstance(grp, dict) else grp
             for side, grp in params.items()}
 
 

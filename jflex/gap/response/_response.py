@@ -32,6 +32,7 @@ from ...effects._flexible_joint import smooth_dead_zone
 from ..._inputs import Sampled
 from .._effect_term import FamilyCoefficients
 from .._inertia import tolerance_spread
+from ...effects._registry import ROTOR_INERTIA
 
 TIP_CHANNELS = {"tip_x": 0, "tip_y": 1, "tip_z": 2}  # [m] origin of the case's tool_frame, base axes
 RTOL, ATOL = 1e-7, 1e-9  # the records' noise is ~1e-4 of their spread: the solver error stays far below
@@ -60,7 +61,7 @@ def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     for term in tfit.terms if tfit is not None else ():
         term.contribute(parts, np.asarray(tfit.theta[k:k + term.n_params], float))
         k += term.n_params
-    rot = parts.coeff["rotor_inertia"]  # (n,): the family's one parameter per joint
+    rot = parts.coeff[ROTOR_INERTIA]  # (n,): the family's one parameter per joint
     if rotor is not None:
         rot += np.asarray(rotor, float)
     for j, v in (springs or {}).items():
@@ -75,7 +76,7 @@ def simulation_model(robot, tfit, springs=None, rotor=None) -> Model:
     # without torque-side terms (no torque training data) every family but the rotor inertia is
     # zero for the whole diagnosis: left out, the 3-joint arm's dynamics took 1130 operations
     # instead of 1975, which every simulated program traces and compiles
-    effects = parts.effects() if tfit is not None else parts.effects(("rotor_inertia",) if np.any(rot) else ())
+    effects = parts.effects() if tfit is not None else parts.effects((ROTOR_INERTIA,) if np.any(rot) else ())
     if flex:
         kk = np.array([springs[j][0] for j in flex], float)
         cc = np.array([springs[j][1] for j in flex], float)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _set as T
+from ...effects._registry import PAYLOAD
 
 GAIN_LIMIT = 3.0  # a measured torque GAIN_LIMIT x the model's, or 1/GAIN_LIMIT of it: beyond any payload
 # or inertia error a diagnosis could name (an unmodelled payload heavier than the arm's own links)
@@ -111,7 +112,7 @@ def _not_a_payload(pb, state, suspects: list[dict]) -> list[dict]:
         return suspects  # (sets without their robot: no payload's columns to fit)
     from ._terms import make_term
 
-    fit = T.fit_with(state.tfit.terms, state.tfit.delay, make_term("payload", None), pb.ttrain,
+    fit = T.fit_with(state.tfit.terms, state.tfit.delay, make_term(PAYLOAD, None), pb.ttrain,
                      getattr(pb, "inertia", None))
     pred = {s.name: T.predict(fit, s) for s in pb.ttrain}
     out = []
