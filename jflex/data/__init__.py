@@ -1,7 +1,7 @@
 """The data layer: measured logs read into one record type and conditioned before any analysis.
 
-Readers (CSV logs with a column map, ROS 2 bags / MCAP, UFF58 FRF files, NPZ archives) give a
-:class:`Record`: arrays in SI units, per-channel metadata (:class:`Channel`: unit, source column,
+Readers (CSV logs, ROS 2 bags / MCAP and UFF58 FRF files, read as a plain :class:`LogMap` says;
+NPZ archives) give a :class:`Record`: arrays in SI units, per-channel metadata (:class:`Channel`: unit, source column,
 scale, offset, quality flags) and a ``conditioning`` report. The conditioning steps
 (:mod:`jflex.data._condition`) make stamps uniform, merge files on time, name dead, stuck, flat,
 saturated and few-level channels, count spikes, choose a low-pass cutoff per record and turn motor
@@ -27,6 +27,7 @@ from ._condition import (
     resample_uniform as resample_uniform,
 )
 from ._csv import Table as Table, csv_arrays as csv_arrays, read_csv as read_csv
+from ._log_map import LogMap as LogMap
 from ._npz import load_npz_fields as load_npz_fields, read_npz as read_npz
 from ._posture import yaml_posture as yaml_posture
 from ._record import Channel as Channel, Record as Record

@@ -1,5 +1,6 @@
-"""CSV data sets: a log plus the column map case.yaml gives for it, read into the arrays an NPZ
-data set holds (``t``, ``q``, ``tau``, ...); the case loader then checks them like any NPZ.
+"""CSV data sets: a log plus its column map (:class:`jflex.data.LogMap`, the case loader's
+translation of a case.yaml data set), read into the arrays an NPZ data set holds (``t``, ``q``,
+``tau``, ...); the case loader then checks them like any NPZ.
 
 Only the mapped columns are parsed (a log may carry text columns besides). Each value is the raw
 cell minus its ``offset``, times its ``scale`` factor (e.g. motor current [A] x torque constant x
@@ -20,6 +21,7 @@ import numpy as np
 
 from .._errors import ConfigError, DataError
 from ._condition import merge_on_time
+from ._log_map import LogMap
 from ._posture import yaml_posture
 from ._record import Channel, Record
 
@@ -100,28 +102,31 @@ class Table:
             raise
 
 
-def _tables(paths, spec, case_file, fld):
+def _tables(paths, m):
+    case_file, fld = m.where
     tables = []
     for p in paths:
         if not p.is_file():
             raise ConfigError(f"{case_file}: field '{fld}.file': data file {p} not found")
-        tables.append(Table(p, DELIMITERS[spec.delimiter] if spec.delimiter else None, sniff=spec.delimiter is None))
+        tables.append(Table(p, DELIMITERS[m.delimiter] if m.delimiter else None, sniff=m.delimiter is None))
     return tables
 
 
-def transmission(motor, order, spec, case_file, fld):
+def transmission(motor, order, m: LogMap):
     """Joint torques (N, n) from the scaled motor torques ``motor`` (columns in joint ``order``):
-    the ``coupling`` matrix of the case applied to the joints it names, then ``torque_offset``."""
+    the ``coupling`` matrix of the log map ``m`` applied to the joints it names, then its
+    ``torque_offset``."""
+    case_file, fld = m.where
     tau = np.array(motor, float)
-    cp = getattr(spec, "coupling", None)
+    cp = m.coupling
     if cp is not None:
-        missing = [j for j in cp.joints if j not in order]
+        missing = [j for j in cp["joints"] if j not in order]
         if missing:
             raise ConfigError(f"{case_file}: field '{fld}.coupling.joints': {missing} have no torque column "
                               f"(torque joints {list(order)})")
-        sel = [list(order).index(j) for j in cp.joints]
-        tau[:, sel] = motor[:, sel] @ np.asarray(cp.matrix, float)
-    off = getattr(spec, "torque_offset", None) or {}
+        sel = [list(order).index(j) for j in cp["joints"]]
+        tau[:, sel] = motor[:, sel] @ np.asarray(cp["matrix"], float)
+    off = m.torque_offset or {}
     for j, v in off.items():
         if j not in order:
             raise ConfigError(f"{case_file}: field '{fld}.torque_offset.{j}': {j!r} has no torque column "
@@ -130,30 +135,30 @@ def transmission(motor, order, spec, case_file, fld):
     return tau
 
 
-def motor_angles(q, order, spec, case_file, fld):
+def motor_angles(q, order, m: LogMap):
     """Joint angles (N, n) from the position columns ``q`` (columns in joint ``order``; rates and
     accelerations alike): where the ``coupling`` says its joints' encoders read motor angles
     (``angles: motor``, K x the joint angles in joint-side units once scaled), the joint angles are
     K^-1 x them."""
-    cp = getattr(spec, "coupling", None)
-    if cp is None or getattr(cp, "angles", "joint") != "motor":
+    case_file, fld = m.where
+    cp = m.coupling
+    if cp is None or cp.get("angles", "joint") != "motor":
         return q
-    missing = [j for j in cp.joints if j not in order]
+    missing = [j for j in cp["joints"] if j not in order]
     if missing:
         raise ConfigError(f"{case_file}: field '{fld}.coupling.joints': {missing} have no position column "
                           f"(position joints {list(order)})")
     q = np.array(q, float)
-    sel = [list(order).index(j) for j in cp.joints]
-    q[:, sel] = np.linalg.solve(np.asarray(cp.matrix, float), q[:, sel].T).T
+    sel = [list(order).index(j) for j in cp["joints"]]
+    q[:, sel] = np.linalg.solve(np.asarray(cp["matrix"], float), q[:, sel].T).T
     return q
 
 
 def _mapped(cols, scale, offset, header, label, case_file, fld) -> dict:
-    """``{column: its field in case.yaml}`` of the column map ``cols``; every mapped column must be
-    in the files' ``header``, every scaled or offset one mapped."""
+    """``{column: its field}`` of the column map ``cols``; every mapped column must be in the files'
+    ``header``, every scaled or offset one mapped."""
     mapped = {}
-    for key in type(cols).model_fields:
-        v = getattr(cols, key)
+    for key, v in cols.items():
         for sub, c in ({None: v} if isinstance(v, str) else (v or {})).items():
             mapped.setdefault(c, f"{fld}.columns.{key}" + (f".{sub}" if sub else ""))
     for c, where in mapped.items():
@@ -168,11 +173,11 @@ def _mapped(cols, scale, offset, header, label, case_file, fld) -> dict:
     return mapped
 
 
-def _values(tables, mapped, scale, offset, spec, time_col, time_unit, case_file, fld):
+def _values(tables, mapped, scale, offset, m, time_col, time_unit, case_file, fld):
     """``(values, stamps, merge report)``: each mapped column's values (minus its offset, times
     its scale), the files of one run merged on time (the stamps [s] of a merged log without a time
     column, else None; the report None for one file)."""
-    rate = getattr(spec, "rate", None)  # a log without a time column: row k at k / rate seconds
+    rate = m.rate  # a log without a time column: row k at k / rate seconds
 
     def raw(tb, c, finite=True):
         v = (tb.column(c) - offset.get(c, 0.0)) * scale.get(c, 1.0)
@@ -182,11 +187,11 @@ def _values(tables, mapped, scale, offset, spec, time_col, time_unit, case_file,
             raise DataError(f"{tb.path}: column {c!r} ({mapped[c]}), line {k}: empty or not finite")
         return v
 
-    finite_ok = {spec.columns.damping_ratio} if spec.kind == "modal" else set()
+    finite_ok = {m.columns.get("damping_ratio")} if m.kind == "modal" else set()
     if len(tables) == 1:
         return {c: raw(tables[0], c, c not in finite_ok) for c in mapped}, None, None
     if time_col is None and rate is None:
-        raise ConfigError(f"{case_file}: field '{fld}.file': a {spec.kind} data set is one file")
+        raise ConfigError(f"{case_file}: field '{fld}.file': a {m.kind} data set is one file")
     parts = []
     for tb in tables:
         if time_col is None:
@@ -217,22 +222,23 @@ class _Columns:
         return self.vals[c] * factor
 
     def block(self, key, order, factor=1.0):
-        return np.column_stack([self.col(getattr(self.cols, key)[j], factor) for j in order])
+        return np.column_stack([self.col(self.cols.get(key)[j], factor) for j in order])
 
     def note(self, field, j, c, unit):
         self.channels[f"{field}:{j}"] = Channel(f"{field}:{j}", unit, f"{self.label}:{c}", self.scale.get(c, 1.0),
                                                 self.offset.get(c, 0.0))
 
 
-def _torque_fields(v: _Columns, spec, names, t, ang, case_file, fld) -> dict:
+def _torque_fields(v: _Columns, m: LogMap, names, t, ang) -> dict:
     """A torque log's fields: angles (and rates) of its position joints, joint torques."""
-    cols = spec.columns
-    pk = list(cols.position)
+    case_file, fld = m.where
+    cols = m.columns
+    pk = list(cols.get("position"))
     missing = [j for j in names if j not in pk]
     if missing:
         raise ConfigError(f"{case_file}: field '{fld}.columns.position': no column for model joints {missing} "
                           f"(the model has joints {names})")
-    tk = list(cols.torque)
+    tk = list(cols.get("torque"))
     if set(tk) == set(pk):
         torder = pk
     elif set(tk) == set(names):
@@ -241,25 +247,26 @@ def _torque_fields(v: _Columns, spec, names, t, ang, case_file, fld) -> dict:
         raise ConfigError(f"{case_file}: field '{fld}.columns.torque': expected a column for every model joint "
                           f"{names} (or for every position joint {pk}), got {tk}")
     for j in pk:
-        v.note("q", j, cols.position[j], "rad")
+        v.note("q", j, cols["position"][j], "rad")
     for j in torder:
-        v.note("tau", j, cols.torque[j], "N m")
-    tau = transmission(v.block("torque", torder), torder, spec, case_file, fld)
-    out = {"t": t, "q": motor_angles(v.block("position", pk, ang), pk, spec, case_file, fld), "tau": tau,
+        v.note("tau", j, cols["torque"][j], "N m")
+    tau = transmission(v.block("torque", torder), torder, m)
+    out = {"t": t, "q": motor_angles(v.block("position", pk, ang), pk, m), "tau": tau,
            "joints": np.asarray(pk)}
     for key, name in (("velocity", "qd"), ("acceleration", "qdd")):
-        if getattr(cols, key) is not None:
-            if set(getattr(cols, key)) != set(pk):
+        if cols.get(key) is not None:
+            if set(cols.get(key)) != set(pk):
                 raise ConfigError(f"{case_file}: field '{fld}.columns.{key}': expected the joints of "
-                                  f"columns.position {pk}, got {list(getattr(cols, key))}")
-            out[name] = motor_angles(v.block(key, pk, ang), pk, spec, case_file, fld)
+                                  f"columns.position {pk}, got {list(cols.get(key))}")
+            out[name] = motor_angles(v.block(key, pk, ang), pk, m)
     return out
 
 
-def _response_fields(v: _Columns, spec, robot, names, t, ang, case_file, fld) -> dict:
+def _response_fields(v: _Columns, m: LogMap, names, t, ang) -> dict:
     """A response log's fields: applied torques at every model joint, measured channels."""
-    cols = spec.columns
-    tk = list(cols.torque)
+    case_file, fld = m.where
+    cols = m.columns
+    tk = list(cols.get("torque"))
     for j in tk:
         if j not in names:
             raise ConfigError(f"{case_file}: field '{fld}.columns.torque.{j}': unknown model joint {j!r}; "
@@ -267,11 +274,11 @@ def _response_fields(v: _Columns, spec, robot, names, t, ang, case_file, fld) ->
     if set(tk) != set(names):
         raise ConfigError(f"{case_file}: field '{fld}.columns.torque': expected a column for every model joint "
                           f"{names}, got {tk}")
-    ch = list(cols.output)
-    out = {"t": t, "tau": transmission(v.block("torque", names), names, spec, case_file, fld), "channels": np.asarray(ch),
-           "y": np.column_stack([v.col(cols.output[c], ang if c in names else 1.0) for c in ch])}
-    if spec.q0 is not None:
-        q0 = yaml_posture(spec, robot, case_file, fld, ang)
+    ch = list(cols.get("output"))
+    out = {"t": t, "tau": transmission(v.block("torque", names), names, m), "channels": np.asarray(ch),
+           "y": np.column_stack([v.col(cols["output"][c], ang if c in names else 1.0) for c in ch])}
+    if m.q0 is not None:
+        q0 = yaml_posture(m, ang)
         if "joints" in q0:
             q0["q0"] = q0["q0"][[list(q0.pop("joints")).index(j) for j in names]]
         out.update(q0)
@@ -281,36 +288,36 @@ def _response_fields(v: _Columns, spec, robot, names, t, ang, case_file, fld) ->
     return out
 
 
-def read_csv(paths, spec, robot, case_file, fld: str) -> Record:
-    """The :class:`Record` of the CSV data set ``spec`` (a validated ``datasets[i]`` of case.yaml)
-    read from ``paths`` (one file, or several files of one run merged on time)."""
+def read_csv(paths, m: LogMap) -> Record:
+    """The :class:`Record` of the CSV log ``paths`` (one file, or several files of one run merged
+    on time) read as the log map ``m`` says (its column map, scales, units)."""
+    case_file, fld = m.where
     paths = [pathlib.Path(p) for p in (paths if isinstance(paths, (list, tuple)) else [paths])]
-    tables = _tables(paths, spec, case_file, fld)
-    cols, scale, offset, units = spec.columns, spec.scale or {}, getattr(spec, "offset", None) or {}, spec.units
-    pos_unit = units.position if units is not None else "rad"
-    time_unit = units.time if units is not None else "s"
+    tables = _tables(paths, m)
+    cols, scale, offset = m.columns, m.scale or {}, m.offset or {}
+    pos_unit, time_unit = m.position_unit, m.time_unit
     ang = np.pi / 180 if pos_unit == "deg" else 1.0
-    names = list(robot.joint_names)
+    names = list(m.joints)
     header = [h for tb in tables for h in tb.header]
     label = paths[0].name if len(paths) == 1 else ", ".join(p.name for p in paths)
     mapped = _mapped(cols, scale, offset, header, label, case_file, fld)
-    time_col = cols.time if spec.kind != "modal" else None
-    vals, t_rows, merge_report = _values(tables, mapped, scale, offset, spec, time_col, time_unit, case_file, fld)
+    time_col = cols.get("time") if m.kind != "modal" else None
+    vals, t_rows, merge_report = _values(tables, mapped, scale, offset, m, time_col, time_unit, case_file, fld)
     v = _Columns(vals, cols, scale, offset, label)
     conditioning = {"merge": merge_report} if merge_report else {}
-    if spec.kind == "modal":
-        out = yaml_posture(spec, robot, case_file, fld, ang)
-        out.update(freq=v.col(cols.frequency), zeta=v.col(cols.damping_ratio))
+    if m.kind == "modal":
+        out = yaml_posture(m, ang)
+        out.update(freq=v.col(cols.get("frequency")), zeta=v.col(cols.get("damping_ratio")))
         return Record(out, v.channels, conditioning)
     if time_col is None:
-        t = np.arange(len(tables[0].rows)) / getattr(spec, "rate", None) if len(tables) == 1 else t_rows
+        t = np.arange(len(tables[0].rows)) / m.rate if len(tables) == 1 else t_rows
     else:
         t = v.col(time_col, TIME_UNITS[time_unit])
-    if spec.kind == "torque":
-        return Record(_torque_fields(v, spec, names, t, ang, case_file, fld), v.channels, conditioning)
-    return Record(_response_fields(v, spec, robot, names, t, ang, case_file, fld), v.channels, conditioning)
+    if m.kind == "torque":
+        return Record(_torque_fields(v, m, names, t, ang), v.channels, conditioning)
+    return Record(_response_fields(v, m, names, t, ang), v.channels, conditioning)
 
 
-def csv_arrays(path, spec, robot, case_file, fld: str) -> dict:
-    """The NPZ fields of the CSV data set ``spec`` (:func:`read_csv` without the metadata)."""
-    return read_csv(path, spec, robot, case_file, fld).arrays
+def csv_arrays(path, m: LogMap) -> dict:
+    """The NPZ fields of the CSV log ``path`` (:func:`read_csv` without the metadata)."""
+    return read_csv(path, m).arrays

@@ -23,6 +23,11 @@ from .._errors import ConfigError, DataError
 from ._record import Record, channels_of
 from ._validate import check_finite, check_lengths, check_time
 
+# the fields each kind of NPZ data set may hold (docs/case_format.md): only these are read
+NPZ_KEYS = {"torque": ("t", "q", "tau", "qd", "qdd", "tau_repeats", "joints"),
+            "frf": ("q0", "freq", "H", "H_repeats", "joints"),
+            "modal": ("q0", "freq", "zeta", "shapes", "joints"),
+            "response": ("t", "tau", "y", "channels", "q0", "y_repeats")}
 # the largest field read (decompressed): 1 GiB holds 10^7 samples of 13 joints with ten repeats
 MAX_FIELD_BYTES = 1 << 30
 _NPY_MAGIC = b"\x93NUMPY"

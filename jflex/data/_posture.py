@@ -1,18 +1,20 @@
-"""The posture a case.yaml data set states (``q0``), as the NPZ fields a posture-carrying data set
-holds."""
+"""The posture a log map states (``q0``: a case.yaml data set's), as the NPZ fields a
+posture-carrying data set holds."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .._errors import ConfigError
+from ._log_map import LogMap
 
 
-def yaml_posture(spec, robot, case_file, fld: str, factor: float = 1.0) -> dict:
-    """The ``q0`` a case.yaml data set gives (CSV modal/response, UFF frf) as NPZ fields: ``q0``
-    and, for a mapping that names joints the model lacks, ``joints``; angles times ``factor``."""
-    q0 = spec.q0
-    names = list(robot.joint_names)
+def yaml_posture(m: LogMap, factor: float = 1.0) -> dict:
+    """The ``q0`` a log map gives (CSV modal/response, UFF frf) as NPZ fields: ``q0`` and, for a
+    mapping that names joints the model lacks, ``joints``; angles times ``factor``."""
+    case_file, fld = m.where
+    q0 = m.q0
+    names = list(m.joints)
     if isinstance(q0, dict):
         missing = [j for j in names if j not in q0]
         if missing:

@@ -23,6 +23,7 @@ import numpy as np
 
 from .._errors import ConfigError, DataError
 from ._condition import JITTER as JITTER, MAX_GAP as MAX_GAP, resample_uniform
+from ._log_map import LogMap
 from ._record import Channel, Record
 
 TOPIC = "/joint_states"
@@ -71,30 +72,31 @@ def _time(msgs, where: str) -> np.ndarray:
     return stamp
 
 
-def read_rosbag(path: pathlib.Path, spec, robot, case_file, fld: str) -> Record:
-    """The :class:`Record` of the ROS 2 bag data set ``spec`` (a validated ``datasets[i]`` of
-    case.yaml): torque data ``t``, ``q`` (and ``joints``), ``tau``, ``qd`` when every message has
+def read_rosbag(path: pathlib.Path, m: LogMap) -> Record:
+    """The :class:`Record` of the ROS 2 bag ``path`` read as the log map ``m`` says: torque data
+    ``t``, ``q`` (and ``joints``), ``tau``, ``qd`` when every message has
     velocities; response data ``t``, ``tau``, ``y`` (the model joints' angles) and ``channels``.
     Efforts pass ``offset`` (joint -> raw offset), ``scale``, ``coupling`` and ``torque_offset``
     as a CSV's torque columns do."""
+    case_file, fld = m.where
     if not path.exists():
         raise ConfigError(f"{case_file}: field '{fld}.file': data file {path} not found")
-    topic = spec.topic or TOPIC
-    names = list(robot.joint_names)
-    scale = spec.scale or {}
-    offset = getattr(spec, "offset", None) or {}
-    for key, m in (("scale", scale), ("offset", offset)):
-        for j in m:
+    topic = m.topic or TOPIC
+    names = list(m.joints)
+    scale = m.scale or {}
+    offset = m.offset or {}
+    for key, factors in (("scale", scale), ("offset", offset)):
+        for j in factors:
             if j not in names:
                 raise ConfigError(f"{case_file}: field '{fld}.{key}.{j}': {j!r} is not a model joint (a bag's {key} "
                                   f"applies to the effort of a joint; model joints {names})")
     msgs = _messages(path, topic, case_file, fld)
     where = f"{path}: topic {topic!r}"
     if len(msgs) < 2:
-        raise DataError(f"{where}: {len(msgs)} messages (a {spec.kind} data set is a time series)")
+        raise DataError(f"{where}: {len(msgs)} messages (a {m.kind} data set is a time series)")
     # joints the model lacks: kept as posture variables (torque data)
-    joints = names + [j for j in msgs[0][2] if j not in names] if spec.kind == "torque" else names
-    rates = spec.kind == "torque" and all(m[4].size for m in msgs)
+    joints = names + [j for j in msgs[0][2] if j not in names] if m.kind == "torque" else names
+    rates = m.kind == "torque" and all(m[4].size for m in msgs)
     q, qd, tau = [], [], []
     for k, (_, _, nm, pos, vel, eff) in enumerate(msgs):
         col = {j: i for i, j in enumerate(nm)}
@@ -104,7 +106,7 @@ def read_rosbag(path: pathlib.Path, spec, robot, case_file, fld: str) -> Record:
             raise DataError(f"{where}, message {k}: field 'name': no {what} {missing} (it names {nm}; "
                             f"model joints {names})")
         if eff.size == 0:
-            raise DataError(f"{where}, message {k}: field 'effort': empty (a {spec.kind} data set needs the joint "
+            raise DataError(f"{where}, message {k}: field 'effort': empty (a {m.kind} data set needs the joint "
                             "torques, or motor currents with a scale)")
         for field, arr in (("position", pos), ("effort", eff)) + ((("velocity", vel),) if rates else ()):
             if arr.size != len(nm):
@@ -125,20 +127,20 @@ def read_rosbag(path: pathlib.Path, spec, robot, case_file, fld: str) -> Record:
     t = (ns - ns[0]) * 1e-9
     from ._csv import motor_angles, transmission
 
-    arrays = {"q": motor_angles(np.asarray(q)[order], names, spec, case_file, fld),
-              "tau": transmission(np.asarray(tau)[order], names, spec, case_file, fld)}
+    arrays = {"q": motor_angles(np.asarray(q)[order], names, m),
+              "tau": transmission(np.asarray(tau)[order], names, m)}
     if rates:
-        arrays["qd"] = motor_angles(np.asarray(qd)[order], names, spec, case_file, fld)
+        arrays["qd"] = motor_angles(np.asarray(qd)[order], names, m)
     t, arrays, sampling = resample_uniform(t, arrays, where, field="header.stamp")
     channels = {f"q:{j}": Channel(f"q:{j}", "rad", f"{path.name}:{topic}:position[{j}]") for j in joints}
     channels.update({f"tau:{j}": Channel(f"tau:{j}", "N m", f"{path.name}:{topic}:effort[{j}]", scale.get(j, 1.0),
                                          offset.get(j, 0.0)) for j in names})
     cond = {"sampling": sampling}
-    if spec.kind == "response":
+    if m.kind == "response":
         return Record({"t": t, "tau": arrays["tau"], "y": arrays["q"], "channels": np.asarray(names)}, channels, cond)
     return Record({"t": t, **arrays, "joints": np.asarray(joints)}, channels, cond)
 
 
-def rosbag_arrays(path: pathlib.Path, spec, robot, case_file, fld: str) -> dict:
+def rosbag_arrays(path: pathlib.Path, m: LogMap) -> dict:
     """The NPZ fields of a ROS 2 bag data set (:func:`read_rosbag` without the metadata)."""
-    return read_rosbag(path, spec, robot, case_file, fld).arrays
+    return read_rosbag(path, m).arrays

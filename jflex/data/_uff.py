@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._errors import ConfigError, DataError
+from ._log_map import LogMap
 from ._posture import yaml_posture
 
 _ORDINATE = {2: (False, "single"), 4: (False, "double"), 5: (True, "single"), 6: (True, "double")}
@@ -158,8 +159,10 @@ QUANTITY_UNITS = {"m": "receptance", "m/s": "mobility", "m/s^2": "accelerance", 
 AXES = "XYZ"
 
 
-def uff_arrays(path: pathlib.Path, spec, robot, case_file, fld: str) -> dict:
-    """The NPZ fields (``q0``, ``freq``, ``H``) of the UFF frf data set ``spec``."""
+def uff_arrays(path: pathlib.Path, m: LogMap) -> dict:
+    """The NPZ fields (``q0``, ``freq``, ``H``) of the UFF frf data set ``path`` (its posture and
+    quantity from the log map ``m``)."""
+    case_file, fld = m.where
     if not path.is_file():
         raise ConfigError(f"{case_file}: field '{fld}.file': data file {path} not found")
     recs = [r for r in read_uff58(path) if r.function_type == FRF_FUNCTION]
@@ -182,7 +185,7 @@ def uff_arrays(path: pathlib.Path, spec, robot, case_file, fld: str) -> dict:
             raise DataError(f"{path}: records {seen[(o, i)] + 1} and {k + 1} both hold H[{AXES[o]}, {AXES[i]}]")
         if r.x.shape != freq.shape or not np.allclose(r.x, freq, rtol=1e-9, atol=0):
             raise DataError(f"{path}: record {k + 1}: its frequencies differ from record 1's (one grid expected)")
-        quantity = spec.quantity or QUANTITY_UNITS.get(r.units[1].replace(" ", "").lower())
+        quantity = m.quantity or QUANTITY_UNITS.get(r.units[1].replace(" ", "").lower())
         if quantity is None:
             raise DataError(f"{path}: record {k + 1}: output unit {r.units[1]!r} is not one of {list(QUANTITY_UNITS)}; "
                             f"convert to SI or state the quantity in case.yaml ({fld}.quantity)")
@@ -198,4 +201,4 @@ def uff_arrays(path: pathlib.Path, spec, robot, case_file, fld: str) -> dict:
     if missing:
         raise DataError(f"{path}: no record for {missing}: a tool FRF set holds the 3 x 3 translations "
                         "(response X/Y/Z x reference X/Y/Z)")
-    return {**yaml_posture(spec, robot, case_file, fld), "freq": freq, "H": H}
+    return {**yaml_posture(m), "freq": freq, "H": H}

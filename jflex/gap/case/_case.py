@@ -20,11 +20,13 @@ from ..._runs import load_yaml
 from ..._schema import validate
 from ...data._condition import BRIDGE, MAX_GAP
 from ...data._fields import numeric_field
+from ...data._log_map import LogMap
 from ...data._frf_checks import frf_arrays, modal_arrays
-from ...data._npz import load_npz_fields
+from ...data._npz import NPZ_KEYS, load_npz_fields
 from ...data._posture import yaml_posture as yaml_posture
 from ...data._response import TIP_CHANNELS, response_arrays, uniform_response
 from ...data._torque_fields import MIN_WINDOW_SAMPLES, torque_arrays
+from ...data._window import window_mask, window_rows
 from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, RobotSpec, file_format
 
 __all__ = ["Case", "Dataset", "load_case", "case_path", "EFFECT_NAMES", "KINDS", "SPLITS"]
@@ -107,13 +109,6 @@ def _resolve_joints(spec, robot, file, field) -> tuple[str, ...]:
         else:
             raise _err(file, field, f"unknown joint {j!r}; the model has joints {list(names)} (or 'all')")
     return tuple(out)
-
-
-# the fields each kind of NPZ data set may hold (docs/case_format.md): only these are read
-NPZ_KEYS = {"torque": ("t", "q", "tau", "qd", "qdd", "tau_repeats", "joints"),
-            "frf": ("q0", "freq", "H", "H_repeats", "joints"),
-            "modal": ("q0", "freq", "zeta", "shapes", "joints"),
-            "response": ("t", "tau", "y", "channels", "q0", "y_repeats")}
 
 
 STRETCH_MARK = "#"  # a stretch of a split log is named <data set>#<k>, k counting its stretches in time order
@@ -315,15 +310,6 @@ def _nominal(specs, robot, file) -> list[dict]:
 
 
 
-def window_mask(t, window) -> np.ndarray:
-    """The samples of the stamps ``t`` inside ``window`` = [start, end] seconds from the first
-    stamp (``end`` None: to the end); ``jflex case init --hold-out`` checks its split with it."""
-    t = np.asarray(t, float)
-    start, end = window
-    rel = t - t[0]
-    return (rel >= start) & (rel <= (np.inf if end is None else end))
-
-
 def _window(arrs: dict, window, path, fld: str, case_file) -> dict:
     """The samples of a time record (``t`` and every array with a time axis: the first one, the
     second one of ``*_repeats``) inside ``window`` = [start, end] seconds from its first stamp."""
@@ -333,16 +319,7 @@ def _window(arrs: dict, window, path, fld: str, case_file) -> dict:
     if keep.sum() < MIN_WINDOW_SAMPLES:
         raise _err(case_file, f"{fld}.window", f"{list(window)} s keeps {int(keep.sum())} samples of {path.name} "
                    f"(its record lasts {rel[-1]:.4g} s): expected a window inside the record with at least 20")
-    out = {}
-    for k, v in arrs.items():
-        a = np.asarray(v)
-        if k.endswith("_repeats") and a.ndim >= 2 and a.shape[1] == t.size:
-            out[k] = a[:, keep]
-        elif a.ndim >= 1 and a.shape[0] == t.size:
-            out[k] = a[keep]
-        else:
-            out[k] = v
-    return out
+    return window_rows(arrs, keep)
 
 
 def _case_robot(spec, base, file, allow_outside):
@@ -387,6 +364,19 @@ def _case_robot(spec, base, file, allow_outside):
     return robot, notes
 
 
+def log_map(d, robot, file, fld: str) -> LogMap:
+    """The case.yaml data set ``d`` (``fld``: ``datasets[i]`` of ``file``) as the plain log map the
+    readers take: its column map, scales, units, coupling and posture, the model's joints, and
+    ``(file, fld)`` for their messages."""
+    cols, cp, units = d.columns, d.coupling, d.units
+    return LogMap(
+        d.kind, {} if cols is None else {k: getattr(cols, k) for k in type(cols).model_fields},
+        tuple(robot.joint_names), d.scale or {}, d.offset or {},
+        None if cp is None else {"joints": list(cp.joints), "matrix": cp.matrix, "angles": cp.angles},
+        d.torque_offset or {}, units.time if units is not None else "s", units.position if units is not None else "rad",
+        d.rate, d.delimiter, d.q0, d.quantity, d.topic, (file, fld))
+
+
 def _read_dataset(d, fld: str, base, file, robot, allow_outside):
     """The :class:`jflex.data.Record` of the data set ``d`` (``fld`` in case.yaml), read by its
     file's format and cut to its window: ``(record, first file, every file)``."""
@@ -402,11 +392,11 @@ def _read_dataset(d, fld: str, base, file, robot, allow_outside):
     fpath = fpaths[0]
     fmt = file_format(fpaths[0].name if many else d.file, base)
     if fmt == "csv":
-        rec = read_csv(fpaths, d, robot, file, fld)
+        rec = read_csv(fpaths, log_map(d, robot, file, fld))
     elif fmt == "rosbag":
-        rec = read_rosbag(fpath, d, robot, file, fld)
+        rec = read_rosbag(fpath, log_map(d, robot, file, fld))
     elif fmt == "uff":
-        rec = Record(uff_arrays(fpath, d, robot, file, fld))
+        rec = Record(uff_arrays(fpath, log_map(d, robot, file, fld)))
     else:
         rec = read_npz(fpath, f"{fld}.file", file, NPZ_KEYS[d.kind])
     if d.window is not None:
