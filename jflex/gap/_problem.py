@@ -23,11 +23,13 @@ from .response import _response as R
 from .torque import _set as T
 from .torque._scale import dead_channels
 from .torque._terms import KINDS, make_term
+from .case._schema import Options
 from ..effects._registry import CONFOUNDED, BACKLASH, JOINT_FLEXIBILITY, PAYLOAD, ROTOR_INERTIA
 
 TORQUE_EFFECTS = tuple(KINDS)
-DEFAULT_OPTIONS = {"inertia_prior": 1.0, "refit_inertia": True, "filter_cutoff_hz": "auto", "decimate": 1,
-                   "max_effects": 3}
+# the schema's defaults, for a case built without its options (a Case made in code)
+DEFAULT_OPTIONS = {k: Options.model_fields[k].default
+                   for k in ("inertia_prior", "refit_inertia", "filter_cutoff_hz", "decimate", "max_effects")}
 
 
 @dataclasses.dataclass(frozen=True)

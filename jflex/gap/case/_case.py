@@ -28,6 +28,7 @@ from ...data._response import TIP_CHANNELS, response_arrays, uniform_response
 from ...data._torque_fields import MIN_WINDOW_SAMPLES, torque_arrays
 from ...data._window import window_mask, window_rows
 from ._schema import EFFECT_NAMES, EFFECT_VALUES, KINDS, SPLITS, CaseSpec, RobotSpec, file_format
+from ...effects._registry import JOINT_FLEXIBILITY, SENSOR_DELAY
 
 __all__ = ["Case", "Dataset", "load_case", "case_path", "EFFECT_NAMES", "KINDS", "SPLITS"]
 
@@ -518,7 +519,7 @@ def _refuse_long_delay(nominal, datasets, file) -> None:
         return
     span, name = min(spans)
     for i, e in enumerate(nominal):
-        if e["effect"] == "sensor_delay" and "value" in e and float(np.max(e["value"])) > DELAY_SHARE * span:
+        if e["effect"] == SENSOR_DELAY and "value" in e and float(np.max(e["value"])) > DELAY_SHARE * span:
             raise _err(file, f"nominal_effects[{i}].value", f"a delay of {float(np.max(e['value'])):.4g} s against the "
                        f"record '{name}' of {span:.4g} s: expected a delay well below the record length (at most "
                        f"{DELAY_SHARE:g} x it, {DELAY_SHARE * span:.3g} s; a delay is given in seconds)")
@@ -574,7 +575,7 @@ def _short_training_notes(spec, nominal, datasets, robot) -> list:
         return []
     n = robot.nq
     params = (10 * n if spec.options.refit_inertia else 0) + sum(
-        len(e["joints"]) for e in nominal if e["effect"] != "joint_flexibility" and "value" not in e)
+        len(e["joints"]) for e in nominal if e["effect"] != JOINT_FLEXIBILITY and "value" not in e)
     rows = sum(int(np.shape(d.arrays["tau"])[0]) * n for d in train)
     if params == 0 or rows >= ROWS_PER_PARAMETER * params:
         return []
