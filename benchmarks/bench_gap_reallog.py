@@ -55,7 +55,8 @@ def case_format(choice: str, jflex_src: str | None = None) -> str:
         return choice
     import subprocess
 
-    code = ("from jflex.gap import _schema; f = _schema.Dataset.model_fields; "
+    code = ("try:\n    from jflex.gap.case import _schema\nexcept ImportError:\n    from jflex.gap import _schema\n"
+            "f = _schema.Dataset.model_fields; "
             "print('extended' if 'coupling' in f and 'offset' in f else 'current')")
     env = None
     if jflex_src:
