@@ -4,10 +4,10 @@ changed no number).
 
     python benchmarks/compare_diagnoses.py BEFORE AFTER [--show 20]
 
-``BEFORE``/``AFTER`` are bench run folders (or folders of diagnosis JSON files); a case is a
-``results/<id>.json`` file (the jflex family) or a ``diagnosis.json`` below a case's own folder
-(the independent and real-log families). Numbers are compared exactly, as written. Prints one line
-per case (identical / differs / missing) and the count; exits 1 when any case differs.
+``BEFORE``/``AFTER`` are bench run folders; a case is a ``diagnosis.json`` below a case's own
+folder (the independent and real-log families) or, in a folder with none, a ``results/<id>.json``
+file (the jflex family keeps its diagnoses there). Numbers are compared exactly, as written.
+Prints one line per case (identical / differs / missing) and the count; exits 1 when any differs.
 """
 
 from __future__ import annotations
@@ -24,13 +24,9 @@ IGNORED = re.compile(r"(^|_)(seconds|time|times|timing|timings|elapsed|path|path
 
 def diagnoses(root: pathlib.Path) -> dict[str, pathlib.Path]:
     """The diagnosis files of a run folder, by case id."""
-    found = {}
-    for p in sorted(root.rglob("*.json")):
-        rel = p.relative_to(root)
-        if p.name == "diagnosis.json":
-            found[str(rel.parent)] = p
-        elif rel.parts[0] == "results" and len(rel.parts) == 2:
-            found[p.stem] = p
+    found = {str(p.relative_to(root).parent): p for p in sorted(root.rglob("diagnosis.json"))}
+    if not found:  # the jflex family keeps each diagnosis as its scored row's source, results/<id>.json
+        found = {p.stem: p for p in sorted((root / "results").glob("*.json"))}
     return found
 
 
