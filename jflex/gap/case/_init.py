@@ -17,6 +17,7 @@ from ..._config import load_robot
 from ..._errors import ConfigError
 from ..._runs import load_yaml
 from ...data._csv import Table
+from ...effects._registry import COULOMB_FRICTION, VISCOUS_FRICTION
 
 TIME_WORDS = ("time", "t", "timestamp", "stamp", "sec", "secs")
 # role -> header words that name it (a word is a maximal run of letters)
@@ -106,7 +107,7 @@ def _copy_robot(robot: str, folder: pathlib.Path, local) -> str:
     return local(rpath)
 
 
-NOMINAL_FRICTION = [{"effect": "viscous_friction", "joint": "all"}, {"effect": "coulomb_friction", "joint": "all"}]
+NOMINAL_FRICTION = [{"effect": VISCOUS_FRICTION, "joint": "all"}, {"effect": COULOMB_FRICTION, "joint": "all"}]
 
 
 class _Dumper(yaml.SafeDumper):

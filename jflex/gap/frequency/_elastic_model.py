@@ -428,7 +428,7 @@ class FrequencyModel:
         (The real and imaginary parts of ``D`` are built apart, without the complex (modes, S, S)
         stack, in the same floating-point operations as :meth:`stiffness`: the fits' picked-peak
         phases, which call this per data set and trial ``x``, stay bit for bit what they were; an
-        algebraically equal shortcut, ``K_0 + diag(Re d)``, moved case 16's second selected
+        algebraically equal shortcut, ``K_0 + diag(Re d)``, moved the independent UR5 FRF case's second selected
         effect.)"""
         P = self.mats(q0)
         S = len(self.structure.springs)

@@ -110,7 +110,7 @@ class ToolPayload(FrequencyKind):
     (3 modes at 3 training postures, 1 % frequency noise) mass and centre of mass left the held-out
     gap at 2.23 % where the mass alone reached 1.68 % (the noise floor), and its three more
     parameters cost it the selection. On FRFs the centre of mass took the independent FRF payload
-    case from 79 % to 98 % of the excess gap closed (benchmarks/bench_gap_independent.py, case 14;
+    case from 79 % to 98 % of the excess gap closed (benchmarks/bench_gap_independent.py;
     mass 2.278 kg for 2.278). Its rotational inertia freed too (10 parameters) closed 96 %, named
     two more effects that are not there and ran 297 s against 116 s (load ~6 on 2 cores): a sphere
     of a few centimetres adds a fraction of the lever arm's inertia, which two postures' FRFs do

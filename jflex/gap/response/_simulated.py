@@ -21,7 +21,7 @@ placed at the joint (selected, or nominal): screened on a grid of play x stiffne
 placed spring (:func:`scan_play`; the spring fitted without play is softer, as it averages the
 free travel into its stiffness), then identified like the spring with the play free too, before
 it is judged (a screened play's held-out gap hung on the grid: with one more stiffness in the
-grid it went from 0.53 % to 2.10 % against the spring's 0.65 %, independent case 38). A
+grid it went from 0.53 % to 2.10 % against the spring's 0.65 %, on the independent bench's play case). A
 spring alone and a spring with play are nested: the play pays its parameter only when the free
 travel across the gap shows in the records.
 """
@@ -48,7 +48,7 @@ MAX_STEPS = 10  # Levenberg-Marquardt steps of the local fit (each: one forward-
 ZETAS = (0.01, 0.02, 0.04, 0.08, 0.15, 0.3)  # damping ratios of the spring's own mode scanned with the stiffness
 # the screenings' solver tolerances: a grid point is a start, ranked by its training cost (the
 # records' noise is ~1e-4 of their spread); identification and held-out evaluation solve at
-# _response.RTOL / ATOL (on independent case 38 the spring screened at joint 3 is the same grid
+# _response.RTOL / ATOL (on the independent bench's play case the spring screened at joint 3 is the same grid
 # point, and a screening takes 4-6 s less)
 SCREEN_RTOL, SCREEN_ATOL = 1e-5, 1e-7
 PLAYS = tuple(np.geomspace(2e-3 / 8, 6.4e-2, 17))  # [rad] half-widths of the play screened (0.25-64 mrad)
