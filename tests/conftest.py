@@ -18,11 +18,16 @@ os.environ.setdefault("JFLEX_NO_CACHE", "1")
 SLOW = os.environ.get("JFLEX_SLOW", "0") == "1"
 
 
-# Files that take a minute or more on two cores, longest first. `--dist loadfile` hands whole
-# files to the two workers in queue order, and xdist queues the files with the most tests first:
-# a long file with few tests came last, one worker running it while the other idled. These go
-# first (longest processing time first); the other files keep xdist's order.
-LONG_FILES = ("test_gap_response.py", "test_flexible_link.py", "test_identify_fit.py")
+# Files that take half a minute or more on two cores, longest first (measured under load, the
+# slowest tests of each summed). `--dist loadfile` hands whole files to the two workers in queue
+# order, and xdist queues the files with the most tests first: a long file with few tests came
+# last, one worker running it while the other idled. These go first (longest processing time
+# first); the other files keep xdist's order. The tip-response diagnosis is split over two files
+# (test_gap_response.py, test_gap_response_simulation.py) so that the two workers share it.
+LONG_FILES = ("test_gap_realistic.py", "test_flexible_link.py", "test_gap_response_simulation.py",
+              "test_gap_response.py", "test_identify_fit.py", "test_derivatives.py", "test_sweep_cli.py",
+              "test_gap_simulated.py", "test_gap_jitter_e2e.py", "test_sweep_multiprocess.py", "test_trig.py",
+              "test_gap_split_records.py")
 
 
 def pytest_configure(config):
