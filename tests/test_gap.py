@@ -9,6 +9,7 @@ import os
 import pathlib
 import re
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -226,8 +227,11 @@ def test_torque_terms_equal_joint_friction_effect(rotor_case):
     eff = jflex.effects.JointFriction(["joint2"], viscous=fv, coulomb=fc, stribeck=fs, stribeck_velocity=vs, smoothing=SMOOTHING)
     model = jflex.Model(c.robot, [eff])
     k = 200
-    f = np.array([jflex.effects.JointFriction.generalized_force(eff, model.rigid, model.layout.slots[0], 0.0,
-                                                                 jnp.asarray(s.q[i]), jnp.asarray(s.qd[i]), jnp.zeros(0)) for i in range(k)])
+    # the 200 samples in one compiled call (op-by-op, one sample at a time, is slow to dispatch)
+    force = jax.jit(jax.vmap(lambda q, qd: jflex.effects.JointFriction.generalized_force(eff, model.rigid, model.layout.slots[0], 0.0,
+                                                                                        q, qd, jnp.zeros(0))))
+    f = np.asarray(force(jnp.asarray(s.q[:k]), jnp.asarray(s.qd[:k])))
+    assert f.shape == (k, c.robot.nq)
     cols = np.concatenate([TT.make_term("viscous_friction", 1).columns(s), TT.make_term("stribeck_friction", 1, vs).columns(s)], axis=2)[:k]
     tau = cols @ np.array([fv, fc, fs - fc])
     np.testing.assert_allclose(tau, -f, atol=1e-10)
@@ -240,8 +244,9 @@ def test_compensator_term_equals_fourier_compensator(rotor_case):
     model = jflex.Model(c.robot, [jflex.effects.FourierGravityCompensator(B, joint=1)])
     k = 50
     z = jnp.zeros(0)
-    tau_model = np.array([jflex.model_inverse_dynamics(model, 0.0, jnp.asarray(s.q[i]), jnp.asarray(s.qd[i]),
-                                                       jnp.asarray(s.qdd[i]), z) for i in range(k)])
+    inverse = jax.jit(jax.vmap(lambda q, qd, qdd: jflex.model_inverse_dynamics(model, 0.0, q, qd, qdd, z)))
+    tau_model = np.asarray(inverse(*(jnp.asarray(a[:k]) for a in (s.q, s.qd, s.qdd))))  # one compiled call
+    assert tau_model.shape == (k, c.robot.nq)
     cols = TT.make_term("gravity_compensator", 1).columns(s)[:k]
     np.testing.assert_allclose(s.F0[:k] + cols @ np.array([B[0], 0.0, B[1], 0.0]), tau_model, atol=1e-8)
 
