@@ -154,7 +154,8 @@ def rigid_friction(c, rng, run_dir, common):
                               idf.Free("m3c3x", lambda m: m.robot.inertia, index=(2, 1)),
                               idf.Free("m3c3y", lambda m: m.robot.inertia, index=(2, 2))])
     n = spec.bind(true).size
-    rec = recover("rigid+friction (output error)", true, spec, data, start_factors(n, common["starts"], rng), common["tolerance_std"],
+    starts = start_factors(n, common["starts"], rng)[:common["starts"].get("max_per_fit") or None]
+    rec = recover("rigid+friction (output error)", true, spec, data, starts, common["tolerance_std"],
                   idf.levenberg_marquardt(float(common["lm_tol"]), float(common["lm_tol"])), common["max_steps"])
     rec.pop("last_fit")
     out["output_error"] = rec
@@ -185,6 +186,7 @@ def flexible_joints(c, rng, common):
                               idf.Free("C", lambda m: m.effects[0].damping, transform=idf.Log())])
     starts = start_factors(6, common["starts"], rng)
     starts.insert(2, ("alternating", np.array([1.5, 0.5, 1.5, 0.5, 1.5, 0.5])))
+    starts = starts[:common["starts"].get("max_per_fit") or None]
     rec = recover("flexible joints", mk(K, C), spec, data, starts, common["tolerance_std"],
                   idf.levenberg_marquardt(float(common["lm_tol"]), float(common["lm_tol"])), common["max_steps"])
     rec.pop("last_fit")
@@ -221,7 +223,8 @@ def flexible_link(c, rng, common, run_dir):
     data = idf.TimeData(ts, {"beam.tip_deflection": ym}, x0=x0, simulate_kw=dict(rtol=float(c["fit_rtol"]), atol=float(c["fit_atol"])), name="tip")
     spec = idf.ParameterSpec([idf.Free("EI", lambda m: m.effects[1].beam.EI, transform=idf.Log()),
                               idf.Free("k_e", lambda m: m.effects[1].damping.k_e, transform=idf.Log())])
-    rec = recover("flexible link", true, spec, data, start_factors(2, common["starts"], rng), common["tolerance_std"],
+    starts = start_factors(2, common["starts"], rng)[:common["starts"].get("max_per_fit") or None]
+    rec = recover("flexible link", true, spec, data, starts, common["tolerance_std"],
                   idf.levenberg_marquardt(float(c["lm_tol"]), float(c["lm_tol"])), common["max_steps"])
     res = rec.pop("last_fit")
     fig, a = plt.subplots(figsize=(9, 4))
@@ -272,6 +275,8 @@ def _per_joint(item):
 
 class StartsConfig(_Strict):
     random: Annotated[int, Field(ge=0)] = Field(0, description="random +/-50 % starts besides all + and all -")
+    max_per_fit: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="at most this many starts per fit, in the order all +, all -, the rest (None: all)")
 
 
 class ExcitationConfig(_Strict):
