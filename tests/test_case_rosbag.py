@@ -218,12 +218,30 @@ def test_stamp_problems_are_refused(tmp_path, bag_case):
     folder = _case_with(tmp_path / "mixed", bag_case, unstamped=(7,))
     with pytest.raises(jflex.DataError, match=r"log\.mcap: topic '/joint_states', message 7: field 'header\.stamp'"):
         load_case(folder)
-    # ten messages dropped, the rest jittered: resampling would bridge the gap
-    keep = np.r_[0:100, 110:a["t"].size]
+    # messages dropped, the rest jittered. A torque log's stamps are conditioned as a CSV log's:
+    # ten dropped messages (0.055 s, short against the motion) are bridged, forty (0.2 s) cut the
+    # log into two data sets, each gap reported; a response log (simulated from rest) is refused
     h = a["t"][1] - a["t"][0]
-    s = a["t"][keep] + np.random.default_rng(1).uniform(-0.05, 0.05, keep.size) * h
-    folder = _case_with(tmp_path / "gap", bag_case, t=s, q=a["q"][keep], tau=a["tau"][keep])
-    with pytest.raises(jflex.DataError, match=r"field 'header\.stamp': a gap of 0\.05\d* s"):
+
+    def dropped(n, name, edit=None):
+        keep = np.r_[0:100, 100 + n:a["t"].size]
+        s = a["t"][keep] + np.random.default_rng(1).uniform(-0.05, 0.05, keep.size) * h
+        return _case_with(tmp_path / name, bag_case, edit, t=s, q=a["q"][keep], tau=a["tau"][keep]), s
+
+    folder, s = dropped(10, "bridged")
+    d = load_case(folder).datasets[0]
+    gap, = d.conditioning["sampling"]["gaps"]
+    assert gap["action"] == "bridged by linear interpolation" and abs(gap["t_s"] - (s[99] - s[0])) < 1e-9
+    assert d.arrays["t"].size == a["t"].size - 1  # one uniform grid over the gap
+    folder, s = dropped(40, "split")
+    with pytest.warns(UserWarning, match=r"is split at 1 gap\(s\) too long to bridge"):
+        sets = [d for d in load_case(folder).datasets if d.file.suffix == ".mcap"]
+    assert [d.name.rsplit("#", 1)[-1] for d in sets] == ["1", "2"]
+    gap, = sets[0].conditioning["sampling"]["split_from"]["gaps"]
+    assert gap["action"] == "split" and abs(gap["t_s"] - (s[99] - s[0])) < 1e-9
+    assert sets[0].arrays["t"][-1] <= gap["t_s"] + 1e-9 and sets[1].arrays["t"][0] >= gap["t_s"] + 40 * h
+    folder, _ = dropped(40, "response", lambda d: d.update(kind="response"))
+    with pytest.raises(jflex.DataError, match=r"field 'header\.stamp': a gap of 0\.2\d* s"):
         load_case(folder)
     folder = _case_with(tmp_path / "junk", bag_case)
     (folder / "log" / "log.mcap").write_bytes(b"not an mcap file")

@@ -9,10 +9,11 @@ as posture variables, like a CSV's extra position columns).
 
 Time is the header stamp, or the bag's receive time when every stamp is zero, counted from the
 first message (integer nanoseconds subtracted first: epoch seconds as floats keep only about
-0.2 microseconds). Stamps that jitter by more than 1 % of the median step are resampled onto a
-uniform grid of that step by linear interpolation: an angle-only log is filtered and
-differentiated, which needs uniform sampling. A gap over 5 median steps is refused rather than
-bridged.
+0.2 microseconds). A torque log keeps its stamps: the case loader conditions them as it does a
+CSV log's (jittered stamps resampled, a gap short against the motion bridged, a longer one cutting
+the log into data sets, every gap reported). A response log is resampled here: stamps that jitter
+by more than 1 % of the median step go onto a uniform grid by linear interpolation, and a gap
+over 5 median steps that the motion does not allow to bridge is refused.
 """
 
 from __future__ import annotations
@@ -131,11 +132,12 @@ def read_rosbag(path: pathlib.Path, m: LogMap) -> Record:
               "tau": transmission(np.asarray(tau)[order], names, m)}
     if rates:
         arrays["qd"] = motor_angles(np.asarray(qd)[order], names, m)
-    t, arrays, sampling = resample_uniform(t, arrays, where, field="header.stamp")
+    cond = {}
+    if m.kind == "response":
+        t, arrays, cond["sampling"] = resample_uniform(t, arrays, where, field="header.stamp")
     channels = {f"q:{j}": Channel(f"q:{j}", "rad", f"{path.name}:{topic}:position[{j}]") for j in joints}
     channels.update({f"tau:{j}": Channel(f"tau:{j}", "N m", f"{path.name}:{topic}:effort[{j}]", scale.get(j, 1.0),
                                          offset.get(j, 0.0)) for j in names})
-    cond = {"sampling": sampling}
     if m.kind == "response":
         return Record({"t": t, "tau": arrays["tau"], "y": arrays["q"], "channels": np.asarray(names)}, channels, cond)
     return Record({"t": t, **arrays, "joints": np.asarray(joints)}, channels, cond)
