@@ -18,16 +18,14 @@ os.environ.setdefault("JFLEX_NO_CACHE", "1")
 SLOW = os.environ.get("JFLEX_SLOW", "0") == "1"
 
 
-# Files that take half a minute or more on two cores, longest first (measured under load, the
-# slowest tests of each summed). `--dist loadfile` hands whole files to the two workers in queue
+# Files that take half a minute or more on two cores, longest first (each file's test durations
+# summed, on a quiet machine). `--dist loadfile` hands whole files to the two workers in queue
 # order, and xdist queues the files with the most tests first: a long file with few tests came
 # last, one worker running it while the other idled. These go first (longest processing time
-# first); the other files keep xdist's order. The tip-response diagnosis is split over two files
-# (test_gap_response.py, test_gap_response_simulation.py) so that the two workers share it.
-LONG_FILES = ("test_gap_realistic.py", "test_flexible_link.py", "test_gap_response_simulation.py",
-              "test_gap_response.py", "test_identify_fit.py", "test_derivatives.py", "test_sweep_cli.py",
-              "test_gap_simulated.py", "test_gap_jitter_e2e.py", "test_sweep_multiprocess.py", "test_trig.py",
-              "test_gap_split_records.py")
+# first); the other files keep xdist's order.
+LONG_FILES = ("test_gap_realistic.py", "test_flexible_link.py", "test_gap.py", "test_frf_jacobian.py",
+              "test_gap_response.py", "test_identify_fit.py", "test_simulate.py", "test_derivatives.py",
+              "test_gap_simulated.py", "test_dynamics_pinocchio.py", "test_urdf_parity.py", "test_docs.py")
 
 
 def pytest_configure(config):
@@ -55,6 +53,12 @@ def pytest_collection_modifyitems(config, items):
         skip = pytest.mark.skip(reason="an end-to-end run (an experiment, or jflex installed from a wheel): select it with -m experiments")
         for item in items:
             if "experiments" in item.keywords:
+                item.add_marker(skip)
+    if "long" not in (config.getoption("markexpr") or "") and not SLOW:
+        skip = pytest.mark.skip(reason="a long end-to-end case, run in CI's step after the suite: select it with -m long "
+                                       "(or JFLEX_SLOW=1)")
+        for item in items:
+            if "long" in item.keywords:
                 item.add_marker(skip)
     if SLOW:
         return

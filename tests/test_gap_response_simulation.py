@@ -17,6 +17,7 @@ from jflex.gap import diagnose
 from test_gap_response import TIP_NOISE, _truth
 
 
+@pytest.mark.long
 def test_joint_flexibility_seen_at_the_tip_is_found(tmp_path):
     # springs fitted on FRF training data (motors held) are simulated in the tip set: the applied
     # torque drives the motor side (the stated rotor inertia), the spring the link. The nominal

@@ -166,6 +166,7 @@ def test_a_log_whose_stretches_are_all_too_short_is_refused_naming_the_gaps(tmp_
         load_case(folder)
 
 
+@pytest.mark.long
 def test_a_split_case_is_diagnosed(tmp_path):
     # the nominal model is the arm that made the torques: with both logs cut in two, the diagnosis
     # judges the gap on both stretches of the validation log and finds it within the noise

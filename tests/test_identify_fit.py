@@ -223,6 +223,7 @@ def _hysteretic_recovery(t_end, n, start, width=1e-5):
     return res, h0, delta
 
 
+@pytest.mark.long
 def test_time_response_fit_recovers_hysteretic_damping():
     # +50 % h0, -50 % delta, as in experiments/identify_seed004.py; 0.6 s (24 samples) is enough
     # for the 1-mode cantilever (measured: -5e-5 and +5e-4 off in 11 steps; the remaining error is
