@@ -3,7 +3,8 @@ generator): stale rows (a logger writing its last sample again) are removed and 
 the fresh neighbours; a gap short against the motion is bridged and reported, longer ones are
 refused with every gap named; a log spliced from two runs (an angle jumping in one sample) is
 refused naming the sample; equal stamps are named as such; the angles of a fine encoder whose
-readings repeat get a cutoff near the motion's band, not tens of times above it."""
+readings repeat, of a fast log of rounded readings, and of a log resampled from jittered stamps get
+a cutoff near the motion's band, not tens of times above it."""
 
 from __future__ import annotations
 
@@ -132,3 +133,32 @@ def test_five_significant_digits_after_a_rest_are_no_splice():
     spliced[12000:, 1] += 1.27
     with pytest.raises(jflex.JFlexError, match="jumps in one sample"):
         angle_jumps(t, spliced, "log")
+
+
+def test_a_fast_log_of_rounded_readings_gets_a_cutoff_near_the_motion():
+    # a 5 kHz log keeping 5 significant digits of motor angles near 20-60 rad (gear 32): its readings
+    # repeat. The band is held by the angles' power read in 0.5 Hz steps (1024-sample segments step
+    # 4.9 Hz at 5 kHz, and a 3 Hz motion read 14.6 Hz): within 3 x the motion's 3 Hz
+    fs = 5000.0
+    t = np.arange(int(6.3 * fs)) / fs
+    motor = 32.0 * _fourier(t, [0.5, 1.0, 2.0, 3.0], [0.05, 0.04, 0.03], 3) + np.array([60.0, -40.0, 20.0])
+    q = np.array([[float(f"{v:.5g}") for v in row] for row in motor]) / 32.0
+    fc, info = choose_cutoff(q, 1 / fs)
+    assert info["method"] == "motion_band" and 3.0 < fc / 2.5 <= 3 * 3.0, info
+
+
+def test_a_resampled_log_holds_its_band_by_the_angles_power():
+    # angles resampled from jittered stamps are interpolated between counts and between stamps that
+    # were off: their sample-to-sample noise estimate reads neither, and a trace of fast motion
+    # (here a 30 Hz line holding under 1e-6 of the power) carried the band, and the cutoff, to it. The
+    # band of a resampled log is held within 2 x where 99.9 % of the angles' power lies
+    from jflex.data._signal import motion_band, power_band
+
+    fs = 1000.0
+    t = np.arange(4000) / fs
+    q = _fourier(t, [0.5, 1.0, 2.0, 3.0], [0.5, 0.4], 4) + 2e-4 * np.sin(2 * np.pi * 30.0 * t)[:, None]
+    assert motion_band(q, 1 / fs) >= 30.0
+    edge = power_band(q, 1 / fs, resolution_hz=0.5)
+    assert 3.0 <= edge <= 4.0 and 3.0 < motion_band(q, 1 / fs, resampled=True) <= 2 * edge
+    fc, info = choose_cutoff(q, 1 / fs, resampled=True)
+    assert info["method"] == "motion_band" and fc / 2.5 <= 3 * 3.0, info

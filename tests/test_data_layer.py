@@ -384,7 +384,7 @@ def test_given_cutoff_reads_the_torque_noise_below_it(tmp_path, monkeypatch):
     import jflex.data._angle_log as A
     from jflex.gap.torque._set import torque_set
 
-    monkeypatch.setattr(A, "motion_band", lambda q, h, sig: 0.48 / h)  # the estimator's failure
+    monkeypatch.setattr(A, "motion_band", lambda q, h, sig, **kw: 0.48 / h)  # the estimator's failure
 
     traj, fs = _motion(3), 500.0
     t = np.arange(int(8 * fs)) / fs

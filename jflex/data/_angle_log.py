@@ -56,13 +56,14 @@ class AngleLog:
         return qf, qdf, np.gradient(qdf, h, axis=0)
 
 
-def log_cutoff(q_raw, h: float, f_m: float, qd, cutoff_hz, decimate: int, where: str):
+def log_cutoff(q_raw, h: float, f_m: float, qd, cutoff_hz, decimate: int, where: str, resampled: bool = False):
     """``(cutoff [Hz], info, band [Hz] the cutoff stands for)`` of a log with angles ``q_raw`` at
     step ``h`` and motion band ``f_m``: :func:`jflex.data.choose_cutoff` for ``"auto"`` (or None),
     else the given cutoff, refused unless below 0.9 x the Nyquist frequency after ``decimate``."""
     nyq = 0.5 / (h * decimate)
     if cutoff_hz in (None, "auto"):
-        fc, cut = choose_cutoff(q_raw, h, qd=qd, factor=CUTOFF_FACTOR, decimate=decimate, limit=CUTOFF_LIMIT)
+        fc, cut = choose_cutoff(q_raw, h, qd=qd, factor=CUTOFF_FACTOR, decimate=decimate, limit=CUTOFF_LIMIT,
+                                resampled=resampled)
         f_b = fc / CUTOFF_FACTOR  # the band the cutoff stands for (the motion band, or the fallback's)
         return fc, cut, f_b
     fc, cut = float(cutoff_hz), {"method": "given (options.filter_cutoff_hz)", "nyquist_hz": nyq}
@@ -89,20 +90,22 @@ def filtered_torque_variance(tau_raw, h: float, fc: float, f_b: float):
 
 
 def process_angle_log(t, rows: dict, where: str, *, cutoff_hz="auto", decimate: int = 1,
-                      velocity_only: bool = False) -> AngleLog:
+                      velocity_only: bool = False, resampled: bool = False) -> AngleLog:
     """Resample ``rows`` (``q``, ``tau``, ``q_extra``, and ``qd`` when ``velocity_only``, ``tau_valid``
     when some samples are masked) at stamps ``t`` onto a uniform grid, read the angle noise and the
     motion band, choose the cutoff (:func:`log_cutoff`), move logged velocities that lag the angles
-    back, filter and differentiate, filter the torques and predict their noise."""
+    back, filter and differentiate, filter the torques and predict their noise. ``resampled``: the
+    rows were resampled from jittered stamps already (:func:`jflex.data.condition_torque`)."""
     t, rows, sampling = resample_uniform(t, rows, where)
+    resampled = resampled or sampling["resampled"]
     q_raw, tau_raw = rows["q"], rows["tau"]
     h = float(np.mean(np.diff(t)))
     sig_q = angle_noise(q_raw)
     # the angle noise redrawn through the processing (the floor's processing term): read off the
     # motion (a fast smooth motion's second difference is no noise)
     sig_draw = angle_noise(q_raw, motion_free=True)
-    f_m = motion_band(q_raw, h, sig_q)
-    fc, cut, f_b = log_cutoff(q_raw, h, f_m, rows.get("qd"), cutoff_hz, decimate, where)
+    f_m = motion_band(q_raw, h, sig_q, resampled=resampled)
+    fc, cut, f_b = log_cutoff(q_raw, h, f_m, rows.get("qd"), cutoff_hz, decimate, where, resampled)
     sig_qd = None
     if velocity_only:
         # the velocities' noise where the filter lets it through: a differenced encoder's is blue

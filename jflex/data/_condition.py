@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._errors import DataError
-from ._signal import angle_noise, motion_band, power_band, robust_sigma
+from ._signal import POWER_RESOLUTION, _repeats, angle_noise, motion_band, power_band, robust_sigma
 
 JITTER = 0.01  # largest deviation of a step from the median step kept as it is (relative)
 DROP = 1.5  # a step over 1.5 median steps: samples were dropped there
@@ -475,7 +475,7 @@ def _power_edge(f, P, share: float) -> float:
 
 
 def choose_cutoff(q, dt: float, *, qd=None, factor: float = CUTOFF_FACTOR, decimate: int = 1,
-                  limit: float = CUTOFF_LIMIT):
+                  limit: float = CUTOFF_LIMIT, resampled: bool = False):
     """The low-pass cutoff [Hz] of one record, from its own angle spectrum, always inside
     ``(0, limit x Nyquist)`` (the Nyquist frequency after ``decimate``).
 
@@ -491,19 +491,23 @@ def choose_cutoff(q, dt: float, *, qd=None, factor: float = CUTOFF_FACTOR, decim
     reach the limit, the cutoff is the limit itself (``limit``).
 
     **Returns** ``(cutoff, info)``: info names the ``method`` and holds ``motion_band_hz``,
-    ``nyquist_hz`` and ``angle_noise_rad``."""
+    ``nyquist_hz`` and ``angle_noise_rad``. ``resampled``: the angles were resampled from jittered
+    stamps (:func:`jflex.data._signal.motion_band`)."""
     from scipy.signal import detrend, welch
 
     q = np.asarray(q, float)
     nyq = float(0.5 / (dt * max(int(decimate), 1)))
     top = limit * nyq
     sig = angle_noise(q)
-    f_m = motion_band(q, dt, sig)
+    f_m = motion_band(q, dt, sig, resampled=resampled)
     nper = min(q.shape[0], 1024)
     df = 1.0 / (dt * nper)
+    # a band held by the angles' power on an encoder grid was read in finer frequency steps
+    held = resampled or _repeats(q).any()
+    df_m = 1.0 / (dt * min(q.shape[0], max(nper, int(np.ceil(1.0 / (dt * POWER_RESOLUTION)))))) if held else df
     info = {"motion_band_hz": f_m, "nyquist_hz": nyq, "limit_hz": top, "angle_noise_rad": sig.tolist()}
     fc = factor * f_m
-    if f_m > 1.5 * df and fc < top:
+    if f_m > 1.5 * df_m and fc < top:
         return fc, {**info, "method": "motion_band"}
     f, P = welch(detrend(q, axis=0), fs=1.0 / dt, nperseg=nper, window="blackmanharris", axis=0)
     # fallback 1, "spectrum_floor": the angle noise as the spectrum itself shows it (its median

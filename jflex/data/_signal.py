@@ -75,6 +75,8 @@ REPEATS = 0.05  # a column whose reading stays the same over 5 % of its steps or
 REPEAT_RUN = 50  # (in holds of at most 50 steps: a longer one is a rest) is quantised coarsely
 POWER_SHARE = 0.999  # ... and its motion band is held within POWER_SPAN x where this share of its power lies
 POWER_SPAN = 2.0
+POWER_RESOLUTION = 0.5  # [Hz] frequency step of the spectrum that cap is read off (a 1024-sample Welch
+# segment steps 4.9 Hz at 5 kHz: a 2-3 Hz motion read 14.6 Hz there)
 
 
 def _repeats(q) -> np.ndarray:
@@ -137,18 +139,21 @@ def angle_noise(q, *, motion_free: bool = False):
     return out
 
 
-def power_band(q, dt: float, share: float = POWER_SHARE) -> float:
+def power_band(q, dt: float, share: float = POWER_SHARE, *, resolution_hz: float | None = None) -> float:
     """The highest, over the columns of ``q`` (N, n), of the frequency [Hz] below which ``share`` of
-    the detrended column's power lies (Welch)."""
+    the detrended column's power lies (Welch: segments of 1024 samples, or, with
+    ``resolution_hz``, long enough to step the frequency by at most that, as far as the record
+    allows)."""
     from scipy.signal import detrend, welch
 
-    f, P = welch(detrend(np.asarray(q, float), axis=0), fs=1.0 / dt, nperseg=min(len(q), 1024), axis=0)
+    nper = 1024 if resolution_hz is None else max(1024, int(np.ceil(1.0 / (dt * resolution_hz))))
+    f, P = welch(detrend(np.asarray(q, float), axis=0), fs=1.0 / dt, nperseg=min(len(q), nper), axis=0)
     edges = [float(f[min(int(np.searchsorted(c, share * c[-1])), f.size - 1)]) for c in np.cumsum(P, axis=0).T
              if c[-1] > 0]
     return max(edges, default=0.0)
 
 
-def motion_band(q, dt: float, noise=None, *, spectrum: str = "second_difference") -> float:
+def motion_band(q, dt: float, noise=None, *, spectrum: str = "second_difference", resampled: bool = False) -> float:
     """Highest frequency [Hz] where some column's angle spectrum (Welch) stands ``MOTION_SNR``
     above the white angle noise ``noise`` (std per column, default :func:`angle_noise`).
 
@@ -160,7 +165,12 @@ def motion_band(q, dt: float, noise=None, *, spectrum: str = "second_difference"
     On angles whose readings repeat (a coarse or blurred encoder grid, :data:`REPEATS`) the noise
     estimate is no better than the grid's: a resampled or rounded log reads a fraction of it, and
     the band ran to 20-45 x the motion's. There the band is held within ``POWER_SPAN`` x the
-    frequency below which ``POWER_SHARE`` of the angles' power lies (:func:`power_band`)."""
+    frequency below which ``POWER_SHARE`` of the angles' power lies (:func:`power_band`, read in
+    steps of ``POWER_RESOLUTION``). So is the band of angles ``resampled`` from jittered stamps
+    onto a uniform grid: interpolated between counts and between stamps that were off, they no
+    longer repeat, and their error follows the motion (a closed-loop null log read 31-38 Hz for a
+    motion whose power ends below 6 Hz, and its cutoff passed the encoder's counts into the
+    accelerations)."""
     from scipy.signal import welch
 
     q = np.asarray(q, dtype=float)
@@ -181,8 +191,8 @@ def motion_band(q, dt: float, noise=None, *, spectrum: str = "second_difference"
     above = (P > MOTION_SNR * level).any(axis=1)
     above[0] = False
     band = float(f[np.flatnonzero(above)[-1]]) if above.any() else float(f[1])
-    if _repeats(q).any():
-        edge = power_band(q, dt)
+    if resampled or _repeats(q).any():
+        edge = power_band(q, dt, resolution_hz=POWER_RESOLUTION)
         if edge > 0:
             band = min(band, max(POWER_SPAN * edge, float(f[1])))
     return band

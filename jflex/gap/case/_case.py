@@ -132,7 +132,8 @@ def _too_short(data, report, options) -> str | None:
     fc = options.get("filter_cutoff_hz")
     if fc in (None, "auto"):
         qd = data["qd"] if report.get("derivatives") == "velocity" else None
-        fc, _ = choose_cutoff(data["q"], h, qd=qd, factor=CUTOFF_FACTOR, decimate=k, limit=CUTOFF_LIMIT)
+        fc, _ = choose_cutoff(data["q"], h, qd=qd, factor=CUTOFF_FACTOR, decimate=k, limit=CUTOFF_LIMIT,
+                              resampled=bool((report.get("sampling") or {}).get("resampled")))
     edge = int(np.ceil(EDGE_PERIODS / fc / h))
     if t.size - 2 * edge >= 20 * k:
         return None

@@ -157,7 +157,9 @@ def torque_set(robot, ds, *, cutoff_hz="auto", decimate: int = 1) -> TorqueSet:
         rows["qd"] = np.asarray(a["qd"], float)
     if valid is not None:
         rows["tau_valid"] = valid.astype(float)
-    log = process_angle_log(t, rows, ds.name, cutoff_hz=cutoff_hz, decimate=decimate, velocity_only=velocity_only)
+    resampled = bool(((getattr(ds, "conditioning", None) or {}).get("sampling") or {}).get("resampled"))
+    log = process_angle_log(t, rows, ds.name, cutoff_hz=cutoff_hz, decimate=decimate, velocity_only=velocity_only,
+                            resampled=resampled)
     F, Y = on_rows(_rigid_batch, (robot,), (log.q, log.qd, log.qdd))
     var_q = propagated_noise(log, lambda qk, qdk, qddk: on_rows(_id_batch, (robot,), (qk, qdk, qddk)) - F)
     sl, weight, edge = trimmed(log, ds.name, decimate)
