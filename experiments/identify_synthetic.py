@@ -65,6 +65,11 @@ def start_factors(n, c, rng):
     return out
 
 
+def _at_most(starts, common):
+    """The first ``starts.max_per_fit`` of a fit's ``starts`` (all of them when it is not set)."""
+    return starts[:common["starts"].get("max_per_fit") or None]
+
+
 def recover(name, true, spec, data, starts, tol_std, solver, max_steps):
     """Fit ``spec`` from every start (truth times its factors); one row per start."""
     b = spec.bind(true)
@@ -154,7 +159,7 @@ def rigid_friction(c, rng, run_dir, common):
                               idf.Free("m3c3x", lambda m: m.robot.inertia, index=(2, 1)),
                               idf.Free("m3c3y", lambda m: m.robot.inertia, index=(2, 2))])
     n = spec.bind(true).size
-    starts = start_factors(n, common["starts"], rng)[:common["starts"].get("max_per_fit") or None]
+    starts = _at_most(start_factors(n, common["starts"], rng), common)
     rec = recover("rigid+friction (output error)", true, spec, data, starts, common["tolerance_std"],
                   idf.levenberg_marquardt(float(common["lm_tol"]), float(common["lm_tol"])), common["max_steps"])
     rec.pop("last_fit")
@@ -186,7 +191,7 @@ def flexible_joints(c, rng, common):
                               idf.Free("C", lambda m: m.effects[0].damping, transform=idf.Log())])
     starts = start_factors(6, common["starts"], rng)
     starts.insert(2, ("alternating", np.array([1.5, 0.5, 1.5, 0.5, 1.5, 0.5])))
-    starts = starts[:common["starts"].get("max_per_fit") or None]
+    starts = _at_most(starts, common)
     rec = recover("flexible joints", mk(K, C), spec, data, starts, common["tolerance_std"],
                   idf.levenberg_marquardt(float(common["lm_tol"]), float(common["lm_tol"])), common["max_steps"])
     rec.pop("last_fit")
@@ -223,7 +228,7 @@ def flexible_link(c, rng, common, run_dir):
     data = idf.TimeData(ts, {"beam.tip_deflection": ym}, x0=x0, simulate_kw=dict(rtol=float(c["fit_rtol"]), atol=float(c["fit_atol"])), name="tip")
     spec = idf.ParameterSpec([idf.Free("EI", lambda m: m.effects[1].beam.EI, transform=idf.Log()),
                               idf.Free("k_e", lambda m: m.effects[1].damping.k_e, transform=idf.Log())])
-    starts = start_factors(2, common["starts"], rng)[:common["starts"].get("max_per_fit") or None]
+    starts = _at_most(start_factors(2, common["starts"], rng), common)
     rec = recover("flexible link", true, spec, data, starts, common["tolerance_std"],
                   idf.levenberg_marquardt(float(c["lm_tol"]), float(c["lm_tol"])), common["max_steps"])
     res = rec.pop("last_fit")

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._errors import DataError
-from ._signal import POWER_RESOLUTION, _repeats, angle_noise, motion_band, power_band, robust_sigma
+from ._signal import (POWER_RESOLUTION, angle_noise, held_by_power, motion_band, power_band, power_segment,
+                      robust_sigma)
 
 JITTER = 0.01  # largest deviation of a step from the median step kept as it is (relative)
 DROP = 1.5  # a step over 1.5 median steps: samples were dropped there
@@ -502,9 +503,8 @@ def choose_cutoff(q, dt: float, *, qd=None, factor: float = CUTOFF_FACTOR, decim
     f_m = motion_band(q, dt, sig, resampled=resampled)
     nper = min(q.shape[0], 1024)
     df = 1.0 / (dt * nper)
-    # a band held by the angles' power on an encoder grid was read in finer frequency steps
-    held = resampled or _repeats(q).any()
-    df_m = 1.0 / (dt * min(q.shape[0], max(nper, int(np.ceil(1.0 / (dt * POWER_RESOLUTION)))))) if held else df
+    # a band held by the angles' power was read in finer frequency steps
+    df_m = 1.0 / (dt * power_segment(q.shape[0], dt, POWER_RESOLUTION)) if held_by_power(q, resampled) else df
     info = {"motion_band_hz": f_m, "nyquist_hz": nyq, "limit_hz": top, "angle_noise_rad": sig.tolist()}
     fc = factor * f_m
     if f_m > 1.5 * df_m and fc < top:

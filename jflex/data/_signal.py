@@ -139,6 +139,18 @@ def angle_noise(q, *, motion_free: bool = False):
     return out
 
 
+def held_by_power(q, resampled: bool = False) -> bool:
+    """Whether :func:`motion_band` holds the band of angles ``q`` by their power (readings that
+    repeat, or angles ``resampled`` from jittered stamps)."""
+    return bool(resampled or _repeats(q).any())
+
+
+def power_segment(n: int, dt: float, resolution_hz: float | None = None) -> int:
+    """Samples per Welch segment of :func:`power_band` on ``n`` samples at step ``dt``."""
+    nper = 1024 if resolution_hz is None else max(1024, int(np.ceil(1.0 / (dt * resolution_hz))))
+    return min(n, nper)
+
+
 def power_band(q, dt: float, share: float = POWER_SHARE, *, resolution_hz: float | None = None) -> float:
     """The highest, over the columns of ``q`` (N, n), of the frequency [Hz] below which ``share`` of
     the detrended column's power lies (Welch: segments of 1024 samples, or, with
@@ -146,8 +158,8 @@ def power_band(q, dt: float, share: float = POWER_SHARE, *, resolution_hz: float
     allows)."""
     from scipy.signal import detrend, welch
 
-    nper = 1024 if resolution_hz is None else max(1024, int(np.ceil(1.0 / (dt * resolution_hz))))
-    f, P = welch(detrend(np.asarray(q, float), axis=0), fs=1.0 / dt, nperseg=min(len(q), nper), axis=0)
+    nper = power_segment(len(q), dt, resolution_hz)
+    f, P = welch(detrend(np.asarray(q, float), axis=0), fs=1.0 / dt, nperseg=nper, axis=0)
     edges = [float(f[min(int(np.searchsorted(c, share * c[-1])), f.size - 1)]) for c in np.cumsum(P, axis=0).T
              if c[-1] > 0]
     return max(edges, default=0.0)
@@ -191,7 +203,7 @@ def motion_band(q, dt: float, noise=None, *, spectrum: str = "second_difference"
     above = (P > MOTION_SNR * level).any(axis=1)
     above[0] = False
     band = float(f[np.flatnonzero(above)[-1]]) if above.any() else float(f[1])
-    if resampled or _repeats(q).any():
+    if held_by_power(q, resampled):
         edge = power_band(q, dt, resolution_hz=POWER_RESOLUTION)
         if edge > 0:
             band = min(band, max(POWER_SPAN * edge, float(f[1])))
